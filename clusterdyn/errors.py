@@ -1,0 +1,58 @@
+"""Typed errors.
+
+* :class:`InputError` (a :class:`ValueError`): bad input before a run; the
+  message names the argument, the value given and what is allowed.
+* :class:`InstabilityError` (an :class:`ase.calculators.calculator.CalculationFailed`):
+  physics out of range during a run; the message names the step, the
+  particles and the quantity.
+"""
+
+from ase.calculators.calculator import CalculationFailed
+
+
+class InputError(ValueError):
+    """Bad input: names the argument, the value and what is allowed."""
+
+    def __init__(self, argument, value, allowed, hint=None):
+        self.argument = argument
+        self.value = value
+        self.allowed = allowed
+        msg = f"{argument}={value!r} is not allowed: expected {allowed}"
+        if hint:
+            msg += f" ({hint})"
+        super().__init__(msg)
+
+
+class InstabilityError(CalculationFailed):
+    """A run left the range where the model is valid (names step, particles, quantity)."""
+
+    def __init__(self, message, step=None, particles=None, quantity=None, value=None, limit=None):
+        self.step = step
+        self.particles = tuple(int(p) for p in particles) if particles is not None else ()
+        self.quantity = quantity
+        self.value = value
+        self.limit = limit
+        parts = [message]
+        if step is not None:
+            parts.append(f"step {step}")
+        if self.particles:
+            parts.append("particle" + ("s " if len(self.particles) > 1 else " ")
+                         + ", ".join(str(p) for p in self.particles))
+        if quantity is not None:
+            q = f"{quantity} = {value:.6g}" if value is not None else str(quantity)
+            if limit is not None:
+                q += f" (limit {limit:.6g})"
+            parts.append(q)
+        super().__init__("; ".join(parts))
+
+
+def check_positive(name, value, allow_zero=False):
+    """Raise InputError unless ``value`` is a finite positive number."""
+    import math
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(name, value, "a number") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise InputError(name, value, "a finite number >= 0" if allow_zero else "a finite number > 0")
+    return v
