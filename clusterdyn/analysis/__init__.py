@@ -1,0 +1,1 @@
+"""Analysis of runs: stresses, profiles, shock fronts, fragments."""

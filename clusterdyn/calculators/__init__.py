@@ -1,0 +1,5 @@
+"""ASE calculators: Cluster Dynamics and Movable Cellular Automata."""
+
+from .cluster import ClusterDynamics
+
+__all__ = ["ClusterDynamics"]

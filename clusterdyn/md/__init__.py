@@ -1,0 +1,6 @@
+"""Dynamics (ASE MolecularDynamics subclasses) and boundary conditions."""
+
+from .boundaries import Piston, RigidWall
+from .damped import DampedVerlet, default_timestep, stability_limit
+
+__all__ = ["DampedVerlet", "Piston", "RigidWall", "default_timestep", "stability_limit"]

@@ -1,0 +1,336 @@
+"""Scene framework: parameters with units, result records, the registry.
+
+A scene is a ready experiment.  It declares its parameters (name, default,
+unit, allowed range), builds only the physics it needs, runs, and returns a
+:class:`SceneResult`: measured quantities with units, each next to its
+reference and relative error, plus the wall time.  The CLI prints it and
+writes it as JSON beside the H5MD file.
+"""
+
+import dataclasses
+import json
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import units
+from ..errors import InputError
+
+_NUM = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$")
+
+
+@dataclass
+class Param:
+    """One scene parameter.
+
+    ``unit`` is the label users write and read (``"km/s"``, ``"um"``); the
+    value handed to the scene is in ASE units.  ``kind`` is float, int, str,
+    bool, choice or ints (a tuple like ``4x4x40``).
+    """
+
+    name: str
+    default: object
+    doc: str
+    unit: str = None
+    kind: str = "float"
+    choices: tuple = None
+    low: float = None          # inclusive bounds on the value in `unit`
+    high: float = None
+    low_open: bool = False     # exclude `low` itself
+    optional: bool = False     # None allowed ("none"/"off")
+
+    def describe(self):
+        d = self.default
+        if self.unit and isinstance(d, (int, float)) and d is not None:
+            dtxt = f"{d:g} {self.unit}"
+        else:
+            dtxt = "none" if d is None else str(d)
+        rng = ""
+        if self.choices:
+            rng = " one of: " + ", ".join(map(str, self.choices))
+        elif self.low is not None or self.high is not None:
+            lo = "" if self.low is None else ("(" if self.low_open else "[") + f"{self.low:g}"
+            hi = "" if self.high is None else f"{self.high:g}]"
+            rng = f" range {lo or '(-inf'}, {hi or 'inf)'}"
+        return f"{self.name} = {dtxt}  -- {self.doc}{rng}"
+
+    def _check_range(self, v, text):
+        if self.low is not None and (v < self.low or (self.low_open and v == self.low)):
+            raise InputError(self.name, text, self._allowed())
+        if self.high is not None and v > self.high:
+            raise InputError(self.name, text, self._allowed())
+
+    def _allowed(self):
+        u = f" {self.unit}" if self.unit else ""
+        if self.choices:
+            return "one of " + ", ".join(map(str, self.choices))
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        lb = "(" if (self.low is None or self.low_open) else "["
+        base = {"int": "an integer", "ints": "integers like 4x4x40"}.get(self.kind, "a number")
+        return f"{base} in {lb}{lo}, {hi}]{u}" + (" or none" if self.optional else "")
+
+    def parse(self, value):
+        """Parse text (CLI) or a Python value; return the value in ASE units."""
+        text = value
+        if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off")):
+            if self.optional:
+                return None
+            raise InputError(self.name, value, self._allowed())
+        if self.kind == "bool":
+            if isinstance(value, bool):
+                return value
+            s = str(value).strip().lower()
+            if s in ("1", "true", "yes", "on"):
+                return True
+            if s in ("0", "false", "no"):
+                return False
+            raise InputError(self.name, value, "true or false")
+        if self.kind in ("str", "choice"):
+            s = str(value)
+            if self.choices and s not in [str(c) for c in self.choices]:
+                raise InputError(self.name, value, self._allowed())
+            return s
+        if self.kind == "ints":
+            if isinstance(value, str):
+                parts = re.split(r"[x,\s]+", value.strip())
+            else:
+                parts = list(value) if hasattr(value, "__iter__") else [value]
+            try:
+                vals = tuple(int(p) for p in parts if p != "")
+            except ValueError:
+                raise InputError(self.name, value, self._allowed()) from None
+            if len(vals) != len(self.default) or any(v < (self.low or 1) for v in vals):
+                raise InputError(self.name, value, f"{len(self.default)} integers >= {self.low or 1}"
+                                 f" like {'x'.join(map(str, self.default))}")
+            return vals
+        # numbers with optional unit
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            num, unit_txt = float(value), ""
+            # a bare Python number is taken in the parameter's own unit
+        else:
+            m = _NUM.match(str(value))
+            if not m:
+                raise InputError(self.name, value, self._allowed())
+            num, unit_txt = float(m.group(1)), m.group(2)
+        if not math.isfinite(num):
+            raise InputError(self.name, value, self._allowed())
+        if self.kind == "int":
+            if unit_txt or num != int(num):
+                raise InputError(self.name, value, self._allowed())
+            self._check_range(num, text)
+            return int(num)
+        if self.unit is None:
+            if unit_txt:
+                raise InputError(self.name, value, "a plain number (no unit)")
+            self._check_range(num, text)
+            return num
+        # convert to the parameter's display unit for the range check
+        if unit_txt:
+            if unit_txt not in units.NAMED:
+                raise InputError(self.name, value, f"a number with a unit like {self.unit} "
+                                 f"(known units: {', '.join(units.NAMED)})")
+            ase_val = num * units.NAMED[unit_txt]
+            disp = ase_val / units.NAMED[self.unit]
+            # dimension check: converting between incompatible units gives absurd ratios;
+            # compare against the known family of the parameter's unit
+            if _family(unit_txt) != _family(self.unit):
+                raise InputError(self.name, value, f"a value in units of {self.unit} "
+                                 f"(same dimension: {', '.join(_same(self.unit))})")
+        else:
+            disp = num
+            ase_val = num * units.NAMED[self.unit]
+        self._check_range(disp, text)
+        return ase_val
+
+
+_FAMILIES = {
+    "length": ("A", "Ang", "nm", "um", "mm", "m", "cm"),
+    "time": ("fs", "ps", "ns", "us", "ms", "s"),
+    "velocity": ("m/s", "km/s", "mm/us", "um/ns"),
+    "density": ("g/cm3", "kg/m3"),
+    "pressure": ("GPa", "MPa", "Pa"),
+    "energy": ("eV", "J"),
+    "force": ("N",),
+    "mass": ("kg", "g", "amu"),
+}
+
+
+def _family(u):
+    for k, v in _FAMILIES.items():
+        if u in v:
+            return k
+    return u
+
+
+def _same(u):
+    return _FAMILIES.get(_family(u), (u,))
+
+
+@dataclass
+class Quantity:
+    """A measured quantity in a display unit, with its reference and relative error."""
+
+    value: float
+    unit: str = ""
+    reference: float = None
+    rel_error: float = None
+    spread: float = None
+    note: str = ""
+
+    def __post_init__(self):
+        if self.reference is not None and self.rel_error is None and self.reference != 0:
+            self.rel_error = (self.value - self.reference) / abs(self.reference)
+
+    def as_dict(self):
+        d = {"value": _clean(self.value), "unit": self.unit}
+        if self.reference is not None:
+            d["reference"] = _clean(self.reference)
+            d["rel_error"] = _clean(self.rel_error)
+        if self.spread is not None:
+            d["spread"] = _clean(self.spread)
+        if self.note:
+            d["note"] = self.note
+        return d
+
+
+def _clean(v):
+    if v is None:
+        return None
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return v
+    return f if math.isfinite(f) else None
+
+
+@dataclass
+class SceneResult:
+    """What a scene returns: quantities (with units, references, errors) and wall time."""
+
+    scene: str
+    quantities: dict
+    wall_time_s: float
+    params: dict = field(default_factory=dict)
+    files: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+    def as_dict(self):
+        d = {"scene": self.scene}
+        for k, q in self.quantities.items():
+            d[k] = q.as_dict()
+        d["wall_time_s"] = round(self.wall_time_s, 4)
+        d["params"] = {k: _jsonable(v) for k, v in self.params.items()}
+        d["files"] = [str(f) for f in self.files]
+        if self.notes:
+            d["notes"] = list(self.notes)
+        if self.extra:
+            d["extra"] = {k: _jsonable(v) for k, v in self.extra.items()}
+        return d
+
+    def to_json(self, **kw):
+        return json.dumps(self.as_dict(), **kw)
+
+    def table(self):
+        """Human summary: quantity, value, unit, reference, error."""
+        lines = [f"{'quantity':<22}{'value':>14} {'unit':<8}{'reference':>14}{'rel. error':>12}"]
+        for k, q in self.quantities.items():
+            ref = "" if q.reference is None else f"{q.reference:14.6g}"
+            err = "" if q.rel_error is None else f"{100 * q.rel_error:+11.2f}%"
+            sp = "" if q.spread is None else f"  (+- {q.spread:.3g})"
+            lines.append(f"{k:<22}{q.value:14.6g} {q.unit:<8}{ref:>14}{err:>12}{sp}")
+        lines.append(f"{'wall time':<22}{self.wall_time_s:14.3f} s")
+        for n in self.notes:
+            lines.append(f"note: {n}")
+        return "\n".join(lines)
+
+    def write(self, folder, name="result.json"):
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / name
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(self.to_json(indent=2))
+        tmp.replace(path)
+        return path
+
+
+def _jsonable(v):
+    if isinstance(v, (str, int, bool)) or v is None:
+        return v
+    if isinstance(v, float):
+        return _clean(v)
+    if isinstance(v, (tuple, list)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+@dataclass
+class Scene:
+    """A registered scene: name, description, parameters, and ``run(params, out, progress)``."""
+
+    name: str
+    description: str
+    params: list
+    runner: object
+
+    def defaults(self):
+        return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
+
+    def parse(self, overrides):
+        """Defaults updated with ``overrides`` (text or values); unknown keys rejected."""
+        known = {p.name: p for p in self.params}
+        vals = self.defaults()
+        for k, v in (overrides or {}).items():
+            if k not in known:
+                raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
+            vals[k] = known[k].parse(v)
+        return vals
+
+    def display(self, vals):
+        """Parameter values in their display units (for JSON and tables)."""
+        out = {}
+        for p in self.params:
+            v = vals.get(p.name)
+            if p.unit and isinstance(v, float):
+                out[p.name] = {"value": v / units.NAMED[p.unit], "unit": p.unit}
+            else:
+                out[p.name] = v
+        return out
+
+    def run(self, overrides=None, out=None, progress=True, **kw):
+        vals = self.parse(overrides)
+        t0 = time.perf_counter()
+        res = self.runner(vals, out=Path(out) if out else None, progress=progress, **kw)
+        if res.wall_time_s is None:
+            res.wall_time_s = time.perf_counter() - t0
+        res.params = self.display(vals)
+        if out is not None:
+            res.files.append(res.write(out))
+        return res
+
+
+SCENES = {}
+
+
+def register(name, description, params):
+    """Decorator registering ``runner(vals, out, progress) -> SceneResult`` as a scene."""
+    def deco(fn):
+        SCENES[name] = Scene(name, description, list(params), fn)
+        return fn
+    return deco
+
+
+def get_scene(name):
+    from . import _load_all  # noqa: F401  (import scene modules)
+    _load_all()
+    if name not in SCENES:
+        raise InputError("scene", name, "one of " + ", ".join(sorted(SCENES)))
+    return SCENES[name]
