@@ -165,11 +165,17 @@ class PairTable:
 
     def __init__(self, law, n_bins=2000):
         self.law = law
-        self.r_min = law.r_min
         self.cutoff = law.cutoff
         self.n_bins = int(n_bins)
-        r = np.linspace(self.r_min, self.cutoff, self.n_bins + 1)
-        self.h = (self.cutoff - self.r_min) / self.n_bins
+        # r0 is a node (so the force at rest is exactly zero); the grid reaches
+        # down to about R_MIN_FACTOR r0 with the same bin count for every pair type
+        rc = law.cutoff / law.r0
+        n_hi = max(1, int(round(self.n_bins * (rc - 1.0) / (rc - R_MIN_FACTOR))))
+        n_lo = self.n_bins - n_hi
+        self.h = (law.cutoff - law.r0) / n_hi
+        self.r_min = law.r0 - n_lo * self.h
+        r = self.r_min + self.h * np.arange(self.n_bins + 1)
+        r[-1] = self.cutoff
         e = law.energy(r)
         f = law.force(r)
         self.e_shift = float(e[-1])
@@ -206,8 +212,8 @@ def build_tables(potentials, n_bins=2000):
     Returns
     -------
     coef_ttbk : (nt, nt, n_bins, 4) float64
-    meta_ttm : (nt, nt, 4) float64
-        r_min, 1/h, cutoff^2, r_min^2 per pair type.
+    meta_ttm : (nt, nt, 5) float64
+        r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2 per pair type.
     tables : nested list of PairTable
     """
     nt = len(potentials)
@@ -217,10 +223,10 @@ def build_tables(potentials, n_bins=2000):
             law = potentials[a] if a == b else MixedPairPotential(potentials[a], potentials[b])
             tables[a][b] = tables[b][a] = PairTable(law, n_bins)
     coef = np.empty((nt, nt, n_bins, 4))
-    meta = np.empty((nt, nt, 4))
+    meta = np.empty((nt, nt, 5))
     for a in range(nt):
         for b in range(nt):
             t = tables[a][b]
             coef[a, b] = t.coef
-            meta[a, b] = (t.r_min, 1.0 / t.h, t.cutoff ** 2, t.r_min ** 2)
+            meta[a, b] = (t.r_min, 1.0 / t.h, t.cutoff ** 2, t.r_min ** 2, 1.0 / t.law.r0 ** 2)
     return coef, meta, tables

@@ -1,0 +1,241 @@
+"""The Cluster Dynamics calculator (ASE): EOS-derived pair potentials on a numba Verlet list."""
+
+import math
+
+import numba
+import numpy as np
+from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
+from ase.stress import full_3x3_to_voigt_6_stress  # noqa: F401  (convention reference)
+
+from ..errors import InputError, InstabilityError
+from ..materials import get_material
+from ..neighbors import NeighborList
+from ..potentials import DEFAULT_RC, ClusterPotential, MixedPairPotential, build_tables, check_rc
+from . import _cd_kernels as K
+
+#: arrays besides ASE's own whose change invalidates cached results
+STATE_ARRAYS = ("material",)
+
+
+def default_skin(rc):
+    """Verlet skin as a multiple of r0: fcc second neighbours sit at sqrt(2) r0, so
+    a skin up to ``1.40 - rc`` adds no pairs at rest; between 0.05 and 0.25."""
+    return float(min(0.25, max(0.05, 1.40 - rc)))
+
+
+class ClusterDynamics(Calculator):
+    """Cluster Dynamics forces (CD eq. 1-2) as an ASE calculator.
+
+    Particles carry a material id in ``atoms.arrays['material']``; material
+    names and cluster sizes come from the arguments or, if omitted, from
+    ``atoms.info['cd_materials']`` and ``atoms.info['cd_r0']`` (set by the
+    builders).  A pair interacts while ``r < rc * r0_ab``; the energy is
+    shifted by ``E(rc)`` so it stays continuous when pairs cross the cutoff.
+
+    Parameters
+    ----------
+    rc : float, default 1.15
+        Cutoff as a multiple of r0, in (1, sqrt 2).
+    materials : list of str or Material, optional
+        Material of each id (index = id).
+    r0 : float or list of float, optional
+        Cluster size of each id, Angstrom.
+    skin : float, optional
+        Verlet skin as a multiple of the smallest r0 (default: :func:`default_skin`).
+    n_table : int, default 2000
+        Bins of the cubic-Hermite pair tables.
+
+    Implemented properties: ``energy``, ``free_energy``, ``energies`` (eV),
+    ``forces`` (eV/Angstrom), ``stress`` (Voigt, eV/Angstrom^3, needs a 3-D cell),
+    ``stresses`` (per-particle virial divided by the cell volume, ASE's
+    convention: they sum to ``stress``; potential part only), ``virials``
+    (per-particle virial W^a of CD eq. 3 without the kinetic part, Voigt, eV).
+    Per-particle quantities are computed only when asked for.
+    """
+
+    implemented_properties = ["energy", "free_energy", "energies", "forces", "stress", "stresses",
+                              "virials"]
+    default_parameters = {"rc": DEFAULT_RC, "materials": None, "r0": None, "skin": None,
+                          "n_table": 2000}
+    nolabel = True
+
+    def __init__(self, **kwargs):
+        Calculator.__init__(self, **kwargs)
+        check_rc(self.parameters.rc)
+        self._setup_key = None
+        self.nl = None
+        self.potentials = None
+        self.last_stats = None
+
+    # -- set-up ------------------------------------------------------------------
+    def set(self, **kwargs):
+        changed = Calculator.set(self, **kwargs)
+        if changed:
+            self._setup_key = None
+        return changed
+
+    def check_state(self, atoms, tol=1e-15):
+        changes = Calculator.check_state(self, atoms, tol)
+        if self.atoms is not None:
+            for name in STATE_ARRAYS:
+                if not np.array_equal(self.atoms.arrays.get(name), atoms.arrays.get(name)):
+                    changes.append(name)
+        return changes
+
+    def _material_spec(self, atoms):
+        mats = self.parameters.materials
+        r0 = self.parameters.r0
+        if mats is None:
+            mats = atoms.info.get("cd_materials")
+        if r0 is None:
+            r0 = atoms.info.get("cd_r0")
+        if mats is None or r0 is None:
+            raise InputError("materials", mats, "material names and r0 given to ClusterDynamics or set "
+                             "by a clusterdyn builder in atoms.info['cd_materials'], ['cd_r0']")
+        if isinstance(mats, str):
+            mats = [mats]
+        r0 = list(np.atleast_1d(np.asarray(r0, dtype=float)))
+        if len(r0) == 1 and len(mats) > 1:
+            r0 = r0 * len(mats)
+        if len(r0) != len(mats):
+            raise InputError("r0", r0, f"one value or one per material ({len(mats)})")
+        return tuple(get_material(m).name if not hasattr(m, "curve") else m for m in mats), tuple(r0)
+
+    def setup(self, atoms):
+        """Build potentials, tables and the neighbour list (once per material set)."""
+        mats, r0 = self._material_spec(atoms)
+        key = (mats, r0, float(self.parameters.rc), self.parameters.skin, self.parameters.n_table)
+        if key == self._setup_key:
+            return
+        rc = check_rc(self.parameters.rc)
+        self.potentials = [ClusterPotential(m, r, rc) for m, r in zip(mats, r0)]
+        self.coef, self.meta, self.tables = build_tables(self.potentials, int(self.parameters.n_table))
+        r0min = min(r0)
+        skin = default_skin(rc) if self.parameters.skin is None else float(self.parameters.skin)
+        if not skin >= 0:
+            raise InputError("skin", self.parameters.skin, "a multiple of r0 >= 0")
+        cutoff = max(t.cutoff for row in self.tables for t in row)
+        self.nl = NeighborList(cutoff, skin * r0min, half=True)
+        self.masses_t = np.array([p.mass for p in self.potentials])
+        self._setup_key = key
+        self._buffers = None
+
+    def _check_types(self, atoms):
+        mid = atoms.arrays.get("material")
+        n = len(atoms)
+        if mid is None:
+            if len(self.potentials) == 1:
+                return np.zeros(n, np.int64)
+            raise InputError("atoms.arrays['material']", None, "a material id per particle")
+        mid = np.ascontiguousarray(mid, dtype=np.int64)
+        if n and (mid.min() < 0 or mid.max() >= len(self.potentials)):
+            raise InputError("atoms.arrays['material']", f"ids {mid.min()}..{mid.max()}",
+                             f"ids in 0..{len(self.potentials) - 1}")
+        return mid
+
+    def _bufs(self, n, per_particle):
+        nk = max(1, min(numba.get_num_threads(), max(1, n // 64)))
+        b = self._buffers
+        if b is None or b["n"] != n or b["nk"] != nk:
+            b = {"n": n, "nk": nk, "f_knc": np.empty((nk, n, 3)), "stat_k": np.empty((nk, 5)),
+                 "vir_k6": np.empty((nk, 6)), "f_nc": np.empty((n, 3))}
+            self._buffers = b
+        if per_particle and "e_kn" not in b:
+            b["e_kn"] = np.empty((nk, n))
+            b["w_kn6"] = np.empty((nk, n, 6))
+        return b
+
+    # -- the pair loop ---------------------------------------------------------
+    def compute(self, atoms, per_particle=False, damping=None, step=None):
+        """Run the pair loop on ``atoms`` (no copy).  Returns a dict of results.
+
+        ``damping = (momenta_nc, invmass_n, eta_tt)`` selects the fused damped
+        kernel (used by :class:`clusterdyn.md.DampedVerlet`); its forces include
+        the damping term.  Raises InstabilityError if a pair is closer than the
+        tabulated range.
+        """
+        self.setup(atoms)
+        types = self._check_types(atoms)
+        pos = atoms.arrays["positions"]
+        self.nl.update(pos, atoms.cell.array, atoms.pbc)
+        nl = self.nl
+        wpos = pos + nl.offset_nc
+        n = len(atoms)
+        b = self._bufs(n, per_particle)
+        bounds = K.chunk_bounds(nl.first_n, b["nk"])
+        args = (wpos, types, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, bounds,
+                b["f_knc"], b["stat_k"])
+        if damping is not None:
+            p_nc, invm_n, eta_tt = damping
+            K.cd_forces_damped(*args, p_nc, invm_n, eta_tt)
+        elif per_particle:
+            K.cd_forces_per_particle(*args, b["vir_k6"], b["e_kn"], b["w_kn6"])
+        else:
+            K.cd_forces(*args, b["vir_k6"])
+        stat = b["stat_k"]
+        self._check_close(stat, types, step)
+        if b["nk"] == 1:
+            forces = b["f_knc"][0].copy()
+        else:
+            forces = np.empty((n, 3))
+            K.reduce_chunks(b["f_knc"], forces)
+        out = {"forces": forces, "energy": float(stat[:, 0].sum())}
+        if damping is None:
+            out["virial"] = b["vir_k6"].sum(axis=0)
+        if per_particle:
+            out["energies"] = b["e_kn"].sum(axis=0)
+            out["virials"] = b["w_kn6"].sum(axis=0)
+        k = int(np.argmin(stat[:, 1]))
+        self.last_stats = {"min_r_over_r0": math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
+                           "closest": (int(stat[k, 2]), int(stat[k, 3])), "npairs": nl.npairs,
+                           "nbuilds": nl.nbuilds}
+        return out
+
+    def _check_close(self, stat, types, step):
+        nclose = stat[:, 4].sum()
+        if nclose > 0:
+            k = int(np.argmin(stat[:, 1]))
+            i, j = int(stat[k, 2]), int(stat[k, 3])
+            a, b = types[i], types[j]
+            r0ab = 1.0 / math.sqrt(self.meta[a, b, 4])
+            r = math.sqrt(stat[k, 1]) * r0ab
+            raise InstabilityError(
+                f"{int(nclose)} pair(s) closer than the potential's tabulated range "
+                f"(r_min = {self.meta[a, b, 0] / r0ab:.2f} r0); the time step is too large for this "
+                "compression or velocity, or the sample overlaps",
+                step=step, particles=(i, j), quantity="distance r/r0", value=r / r0ab,
+                limit=self.meta[a, b, 0] / r0ab)
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        Calculator.calculate(self, atoms, properties, system_changes)
+        atoms = self.atoms
+        want_pp = "energies" in properties or "stresses" in properties or "virials" in properties
+        out = self.compute(atoms, per_particle=want_pp)
+        self.results["energy"] = out["energy"]
+        self.results["free_energy"] = out["energy"]
+        self.results["forces"] = out["forces"]
+        rank3 = atoms.cell.rank == 3
+        if rank3:
+            self.results["stress"] = out["virial"] / atoms.get_volume()
+        elif "stress" in properties:
+            raise PropertyNotImplementedError("stress needs a 3-D cell (atoms.cell has rank "
+                                              f"{atoms.cell.rank})")
+        if want_pp:
+            self.results["energies"] = out["energies"]
+            self.results["virials"] = out["virials"]
+            if rank3:
+                self.results["stresses"] = out["virials"] / atoms.get_volume()
+            elif "stresses" in properties:
+                raise PropertyNotImplementedError("stresses need a 3-D cell; use 'virials' (eV) instead")
+
+    # -- helpers for dynamics -------------------------------------------------
+    def damping_matrix(self, J):
+        """eta_tt[a, b] = 2 m_a m_b/(m_a+m_b) (Gamma_a + Gamma_b)/2, Gamma = c0/(J r0) (amu/time)."""
+        g = np.array([p.c0 / (J * p.r0) for p in self.potentials])
+        m = self.masses_t
+        mu = 2.0 * m[:, None] * m[None, :] / (m[:, None] + m[None, :])
+        return np.ascontiguousarray(mu * 0.5 * (g[:, None] + g[None, :]))
+
+    def law(self, a, b):
+        """Pair law (ClusterPotential or MixedPairPotential) of material ids a, b."""
+        return self.tables[a][b].law
