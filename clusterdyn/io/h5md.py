@@ -1,0 +1,1075 @@
+"""H5MD 1.1 trajectories that MDAnalysis reads without a topology.
+
+:class:`H5MDWriter` is an observer for any ASE ``MolecularDynamics``
+(``dyn.attach(writer, interval=n)``); :class:`H5MDReader` and
+:func:`read_h5md` bring frames back as :class:`ase.Atoms` in ASE units.
+
+File layout (``N`` particles, ``F`` frames)::
+
+    /h5md                      +version [1, 1]
+        author                 +name
+        creator                +name 'clusterdyn', +version
+    /particles/trajectory      (the name MDAnalysis looks up without topology)
+        box                    +dimension 3, +boundary 'periodic'/'none' per axis
+            edges/{step,time,value (F, 3, 3) Angstrom}     only if the cell is not all zero
+        position/{step,time,value (F, N, 3) float64 'Angstrom'}
+        velocity/{step,time,value (F, N, 3) float64 'Angstrom ps-1'}
+        force/{step,time,value (F, N, 3) float64 'kJ mol-1 Angstrom-1'}  only with a calculator
+        species/{step,time,value (F, N) int}            atomic numbers
+        mass/{step,time,value (F, N) float64 'u'}       amu
+        <array>/{step,time,value (F, N, ...)}            every other atoms.arrays entry
+                                                         (id, material, grain, radius, ...)
+                                                         and every ``per_particle`` series,
+                                                         in ASE units as given
+    /observables/<name>/{step,time,value (F, ...)}      kinetic_energy, potential_energy,
+                                                         total_energy ('kJ mol-1') + user ones
+    /parameters/scene          JSON text of ``parameters=``
+    /parameters/dynamics       JSON text of ``dyn.todict()`` (``set_description``)
+
+``step`` (int64) and ``time`` (float64, 'ps') exist once, in ``position``,
+and are hard-linked into every other time-dependent group (as MDAnalysis's
+own writer does), so every series has exactly the frames of ``position``.
+
+Positions and images
+--------------------
+Positions are written exactly as ``atoms.positions`` holds them; no
+``image`` group is written.  ASE's integrators never wrap positions, so
+during a run these are *unwrapped* coordinates: MDAnalysis reads them as
+they are (its analyses wrap on demand, e.g. ``AtomGroup.wrap()``), the
+displacement of a particle across the whole run stays meaningful (fragments,
+ejecta, diffusion), and :func:`read_h5md` returns bit-identical positions.
+If a caller wraps the Atoms itself, the written positions are wrapped too.
+
+Ordering
+--------
+With ``sort_by_id=True`` and an ``atoms.arrays['id']``, every per-particle
+row is written in increasing id order, so row ``i`` is the same particle in
+every frame even if the Atoms are re-sorted during the run (read back, the
+Atoms come in id order).
+
+Crash safety
+------------
+The file uses HDF5's default (oldest compatible) format, no SWMR, and is
+flushed after every frame, so a process killed between frames leaves a file
+that h5py and MDAnalysis open, with every frame written before the kill.
+"""
+
+import getpass
+import warnings
+
+import numpy as np
+
+from clusterdyn import units
+from clusterdyn.errors import InputError
+from clusterdyn.io._common import (clusterdyn_version, dumps, open_h5_read,
+                                   read_json_dataset)
+
+__all__ = ["H5MDWriter", "H5MDReader", "read_h5md"]
+
+#: unit strings written (all accepted by MDAnalysis' H5MD reader)
+UNITS = {
+    "time": "ps",
+    "length": "Angstrom",
+    "velocity": "Angstrom ps-1",
+    "force": "kJ mol-1 Angstrom-1",
+    "energy": "kJ mol-1",
+    "mass": "u",
+}
+
+#: unit string -> factor to multiply a stored value by to get ASE units
+TO_ASE = {
+    "length": {"Angstrom": 1.0, "angstrom": 1.0, "A": 1.0, "nm": 10.0, "pm": 0.01},
+    "time": {"ps": units.PS, "fs": units.fs, "ns": 1e3 * units.PS,
+             "s": units.s, "second": units.s, "sec": units.s},
+    "velocity": {"Angstrom ps-1": 1.0 / units.PS, "A ps-1": 1.0 / units.PS,
+                 "Angstrom fs-1": 1.0 / units.fs, "A fs-1": 1.0 / units.fs,
+                 "nm ps-1": 10.0 / units.PS, "nm ns-1": 10.0 / (1e3 * units.PS),
+                 "pm ps-1": 0.01 / units.PS, "m s-1": units.m / units.s},
+    "force": {"kJ mol-1 Angstrom-1": units.kJ / units.mol,
+              "kJ mol-1 nm-1": 0.1 * units.kJ / units.mol,
+              "kcal mol-1 Angstrom-1": units.kcal / units.mol,
+              "kcal mol-1 A-1": units.kcal / units.mol,
+              "N": units.N, "Newton": units.N, "J m-1": units.N},
+    "energy": {"kJ mol-1": units.kJ / units.mol, "kcal mol-1": units.kcal / units.mol,
+               "eV": 1.0, "J": units.J},
+    "mass": {"u": 1.0, "amu": 1.0, "Da": 1.0},
+}
+
+#: names under particles/trajectory that ``per_particle`` may not use
+RESERVED = ("box", "position", "velocity", "force", "species", "mass", "image")
+#: atoms.arrays entries written through dedicated groups (never as extras)
+STANDARD_ARRAYS = ("positions", "numbers", "momenta", "masses")
+#: the default observables
+DEFAULT_OBSERVABLES = ("kinetic_energy", "potential_energy", "total_energy")
+
+_TRAJ = "particles/trajectory"
+_MAX_CHUNK_BYTES = 1 << 20
+
+
+def _cached_property(atoms, name):
+    """A calculator property, from its result cache when valid, else computed.
+
+    Returns None when ``atoms`` has no calculator.
+    """
+    calc = atoms.calc
+    if calc is None:
+        return None
+    try:
+        value = calc.get_property(name, atoms, allow_calculation=False)
+    except (TypeError, AttributeError):  # calculator without the ASE cache API
+        value = None
+    if value is None:
+        if name == "forces":
+            value = atoms.get_forces(apply_constraint=False)
+        elif name == "energy":
+            value = atoms.get_potential_energy(apply_constraint=False)
+        else:
+            value = calc.get_property(name, atoms)
+    return value
+
+
+def _kinetic_energy(atoms):
+    return atoms.get_kinetic_energy() * units.ENERGY_TO_KJMOL
+
+
+def _potential_energy(atoms):
+    return float(_cached_property(atoms, "energy")) * units.ENERGY_TO_KJMOL
+
+
+def _total_energy(atoms):
+    return (float(_cached_property(atoms, "energy")) + atoms.get_kinetic_energy()) \
+        * units.ENERGY_TO_KJMOL
+
+
+_DEFAULT_OBSERVABLE_FUNCS = {
+    "kinetic_energy": (_kinetic_energy, UNITS["energy"]),
+    "potential_energy": (_potential_energy, UNITS["energy"]),
+    "total_energy": (_total_energy, UNITS["energy"]),
+}
+
+
+def _split_source(argument, name, spec):
+    """``spec`` or ``(spec, unit)`` -> (spec, unit or None)."""
+    if isinstance(spec, tuple):
+        if len(spec) != 2 or not isinstance(spec[1], str):
+            raise InputError(f"{argument}[{name!r}]", spec,
+                             "a source or a (source, unit string) pair")
+        return spec
+    return spec, None
+
+
+def _check_name(argument, name):
+    if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
+        raise InputError(argument, name, "a non-empty name without '/'")
+
+
+def _chunks(shape, itemsize):
+    """Chunk shape: one frame, at most ~1 MiB, for a (0, *shape) dataset."""
+    if not shape:
+        return (1024,)
+    per_row = itemsize * int(np.prod(shape[1:], dtype=np.int64)) if len(shape) > 1 else itemsize
+    rows = max(1, min(shape[0], _MAX_CHUNK_BYTES // max(per_row, 1)))
+    return (1, rows) + tuple(shape[1:])
+
+
+def _storage_dtype(a):
+    a = np.asarray(a)
+    if a.dtype.kind == "f":
+        return np.dtype(np.float64)
+    if a.dtype.kind in "iub":
+        return a.dtype
+    if a.dtype.kind == "c":
+        return np.dtype(np.complex128)
+    raise TypeError(f"cannot store values of dtype {a.dtype} in H5MD")
+
+
+class H5MDWriter:
+    """Write an ASE simulation to an H5MD 1.1 file that MDAnalysis reads.
+
+    Attach it to any ASE dynamics, ``dyn.attach(writer, interval=n)``; each
+    call writes one frame of the Atoms it was built with.  The layout is in
+    the module docstring.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file; use the ``.h5md`` extension so that
+        ``MDAnalysis.Universe(path)`` recognises it without a topology.
+    atoms : ase.Atoms
+        The Atoms being simulated (the same object, not a copy).
+    mode : {'w', 'a'}
+        ``'w'`` creates or overwrites; ``'a'`` appends to an existing file
+        written with the same layout (creates it when missing).
+    dyn : ase.md.md.MolecularDynamics, optional
+        The dynamics; each frame gets ``step = dyn.nsteps`` and
+        ``time = dyn.get_time()``, and ``dyn.todict()`` is stored as its
+        description.  Without it the writer counts frames (continuing after
+        the last stored step in mode ``'a'``) and ``time = step * timestep``.
+    timestep : float, optional
+        ASE time units per counted step when ``dyn`` is None.  Default: 1 ps
+        (MDAnalysis' own default frame spacing).
+    observables : dict, optional
+        Scalar or small-vector observables ``{name: callable(atoms)}`` or
+        ``{name: (callable(atoms), unit_string)}``, stored as returned under
+        ``/observables/<name>``.  They are added to the default set,
+        ``kinetic_energy`` always and ``potential_energy``, ``total_energy``
+        when a calculator is attached (all in 'kJ mol-1'); a value of None
+        removes a default.
+    per_particle : dict, optional
+        Extra per-particle series ``{name: callable(atoms) -> (N, ...) array}``
+        or ``{name: 'arrayname'}`` (an ``atoms.arrays`` key), optionally as
+        ``(source, unit_string)``, stored as returned under
+        ``particles/trajectory/<name>`` (MDAnalysis skips them).  Every
+        ``atoms.arrays`` entry other than positions, numbers, momenta and
+        masses (``id``, ``material``, ``grain``, ``radius``, ...) is written
+        by default under its own name; a value of None removes one.
+    compression : {'gzip', 'lzf', None} or int
+        HDF5 filter for per-particle values (an int is a gzip level 0-9).
+    sort_by_id : bool
+        Write rows in increasing ``atoms.arrays['id']`` order when that
+        array exists.
+    restart_step : int, optional
+        Mode ``'a'`` only: drop the stored frames with ``step >
+        restart_step`` before appending (restarting from a checkpoint taken
+        at that step), see :meth:`truncate_after_step`.
+    parameters : dict, optional
+        Scene parameters, stored as JSON text in ``/parameters/scene``.
+    author : str, optional
+        Stored in ``/h5md/author``; default: the login name.
+
+    Notes
+    -----
+    A frame is written after all its values have been computed, then the
+    file is flushed.  A frame whose step equals the last stored step
+    replaces it (a restarted run re-emitting its first frame does not
+    duplicate it); a step below the last stored one raises
+    :class:`~clusterdyn.errors.InputError`, since H5MD steps must increase.
+
+    Forces come from the calculator's result cache when it is valid
+    (``calc.get_property('forces', atoms, allow_calculation=False)``), as
+    ASE's own trajectory writer does, and are the raw calculator forces
+    (constraints not applied).  Without a calculator at the first frame no
+    ``force`` group is written.
+    """
+
+    def __init__(self, path, atoms, *, mode="w", dyn=None, timestep=None,
+                 observables=None, per_particle=None, compression="gzip",
+                 sort_by_id=True, restart_step=None, parameters=None, author=None):
+        import h5py
+
+        if mode not in ("w", "a"):
+            raise InputError("mode", mode, "'w' (create/overwrite) or 'a' (append)")
+        if not (compression is None or compression in ("gzip", "lzf")
+                or (isinstance(compression, (int, np.integer))
+                    and not isinstance(compression, bool) and 0 <= compression <= 9)):
+            raise InputError("compression", compression, "'gzip', 'lzf', None or a gzip level 0-9")
+        if observables is not None and not isinstance(observables, dict):
+            raise InputError("observables", observables, "a dict {name: callable(atoms)}")
+        if per_particle is not None and not isinstance(per_particle, dict):
+            raise InputError("per_particle", per_particle,
+                             "a dict {name: callable(atoms) or atoms.arrays key}")
+        if restart_step is not None and mode != "a":
+            raise InputError("restart_step", restart_step, "None unless mode='a'")
+        if timestep is not None and not (np.isfinite(timestep) and timestep > 0):
+            raise InputError("timestep", timestep, "a finite time > 0 in ASE units")
+        if len(atoms) == 0:
+            raise InputError("atoms", atoms, "at least one particle")
+
+        self.path = str(path)
+        self.atoms = atoms
+        self.dyn = dyn
+        self.timestep = units.PS if timestep is None else float(timestep)
+        self.compression = compression
+        self.sort_by_id = bool(sort_by_id)
+        self.natoms = len(atoms)
+        self._user_observables = dict(observables or {})
+        self._user_per_particle = dict(per_particle or {})
+        for name, spec in self._user_observables.items():
+            _check_name("observables", name)
+            if spec is not None:
+                func, _ = _split_source("observables", name, spec)
+                if not callable(func):
+                    raise InputError(f"observables[{name!r}]", func, "a callable(atoms) -> float")
+        for name, spec in self._user_per_particle.items():
+            _check_name("per_particle", name)
+            if name in RESERVED:
+                raise InputError("per_particle", name, f"a name other than {RESERVED}")
+            if spec is not None:
+                src, _ = _split_source("per_particle", name, spec)
+                if not (callable(src) or isinstance(src, str)):
+                    raise InputError(f"per_particle[{name!r}]", src,
+                                     "a callable(atoms) -> (N, ...) array or an atoms.arrays key")
+                if isinstance(src, str) and src not in atoms.arrays:
+                    raise InputError(f"per_particle[{name!r}]", src,
+                                     f"a key of atoms.arrays {sorted(atoms.arrays)}")
+
+        self._pbc = np.array(atoms.pbc, dtype=bool)
+        self._layout = None      # set on the first frame (mode 'w') or from the file ('a')
+        self._warned = set()
+
+        existing = mode == "a" and _is_h5md_file(self.path)
+        if mode == "a" and not existing:
+            import os
+            if os.path.exists(self.path):
+                raise InputError("path", self.path, "an H5MD file written by clusterdyn to append to",
+                                 hint="file exists but has no particles/trajectory")
+        self._file = h5py.File(self.path, "a" if existing else "w")
+        try:
+            if existing:
+                self._open_existing(restart_step)
+            else:
+                self._write_header(author)
+            if parameters is not None:
+                self._write_json("scene", parameters)
+            if dyn is not None and hasattr(dyn, "todict"):
+                try:
+                    self.set_description(dyn.todict())
+                except Exception:  # pragma: no cover - a todict that fails is not fatal
+                    pass
+            self._file.flush()
+        except BaseException:
+            self._file.close()
+            raise
+
+    # ------------------------------------------------------------------ setup
+    def _write_header(self, author):
+        f = self._file
+        h = f.require_group("h5md")
+        h.attrs["version"] = np.array([1, 1], dtype=np.int32)
+        if author is None:
+            try:
+                author = getpass.getuser()
+            except Exception:
+                author = "unknown"
+        h.require_group("author").attrs["name"] = str(author)
+        c = h.require_group("creator")
+        c.attrs["name"] = "clusterdyn"
+        c.attrs["version"] = clusterdyn_version()
+        traj = f.require_group(_TRAJ)
+        box = traj.require_group("box")
+        box.attrs["dimension"] = 3
+        box.attrs["boundary"] = ["periodic" if p else "none" for p in self._pbc]
+        self._nframes = 0
+        self._last_step = None
+
+    def _open_existing(self, restart_step):
+        f = self._file
+        traj = f[_TRAJ]
+        if "position" not in traj:       # created but no frame written yet: start afresh
+            self._nframes = 0
+            self._last_step = None
+            if restart_step is not None:
+                self.truncate_after_step(restart_step)
+            return
+        n = traj["position/value"].shape[1]
+        if n != self.natoms:
+            raise InputError("atoms", f"{self.natoms} particles",
+                             f"{n} particles, as stored in {self.path}", hint="cannot append")
+        boundary = [b.decode() if isinstance(b, bytes) else str(b)
+                    for b in traj["box"].attrs["boundary"]]
+        pbc = np.array([b == "periodic" for b in boundary])
+        if not np.array_equal(pbc, self._pbc):
+            raise InputError("atoms.pbc", self._pbc.tolist(),
+                             f"{pbc.tolist()} as stored in {self.path}", hint="cannot append")
+        self._step_ds = traj["position/step"]
+        self._time_ds = traj["position/time"]
+        self._nframes = int(self._step_ds.shape[0])
+        self._last_step = int(self._step_ds[-1]) if self._nframes else None
+        # the layout stored in the file
+        layout = {"edges": "edges" in traj["box"],
+                  "particles": [k for k in traj if k != "box" and isinstance(traj[k], _h5group())
+                                and "value" in traj[k]],
+                  "observables": list(f["observables"]) if "observables" in f else []}
+        self._file_layout = layout
+        if restart_step is not None:
+            self.truncate_after_step(restart_step)
+
+    def _write_json(self, name, obj):
+        g = self._file.require_group("parameters")
+        if name in g:
+            del g[name]
+        g.create_dataset(name, data=dumps(obj))
+
+    def set_description(self, description):
+        """Store ``description`` (e.g. ``dyn.todict()``) as JSON in ``/parameters/dynamics``.
+
+        Parameters
+        ----------
+        description : dict
+            JSON-able mapping; numpy values are converted.
+        """
+        self._write_json("dynamics", description)
+        self._file.flush()
+
+    # --------------------------------------------------------------- sources
+    def _observable_specs(self, atoms):
+        specs = {}
+        specs["kinetic_energy"] = _DEFAULT_OBSERVABLE_FUNCS["kinetic_energy"]
+        if atoms.calc is not None and "energy" in getattr(atoms.calc, "implemented_properties",
+                                                          ("energy",)):
+            specs["potential_energy"] = _DEFAULT_OBSERVABLE_FUNCS["potential_energy"]
+            specs["total_energy"] = _DEFAULT_OBSERVABLE_FUNCS["total_energy"]
+        for name, spec in self._user_observables.items():
+            if spec is None:
+                specs.pop(name, None)
+            else:
+                specs[name] = _split_source("observables", name, spec)
+        return specs
+
+    def _particle_specs(self, atoms):
+        specs = {}
+        for name in atoms.arrays:
+            if name in STANDARD_ARRAYS:
+                continue
+            if name in RESERVED:
+                raise InputError("atoms.arrays", name,
+                                 f"array names other than {RESERVED}",
+                                 hint="rename it or drop it with per_particle={name!r: None}")
+            specs[name] = (name, None)
+        for name, spec in self._user_per_particle.items():
+            if spec is None:
+                specs.pop(name, None)
+            else:
+                specs[name] = _split_source("per_particle", name, spec)
+        return specs
+
+    def _make_layout(self, atoms):
+        cell = np.asarray(atoms.cell[:], dtype=np.float64)
+        has_force = atoms.calc is not None and "forces" in getattr(
+            atoms.calc, "implemented_properties", ("forces",))
+        return {"edges": bool(np.any(cell != 0.0)),
+                "force": has_force,
+                "particles": self._particle_specs(atoms),
+                "observables": self._observable_specs(atoms)}
+
+    def _check_layout_against_file(self, layout):
+        fl = self._file_layout
+        want_p = {"position", "velocity", "species", "mass"} | set(layout["particles"])
+        if layout["force"]:
+            want_p.add("force")
+        have_p = set(fl["particles"])
+        problems = []
+        if want_p != have_p:
+            if want_p - have_p:
+                problems.append(f"per-particle series not in the file: {sorted(want_p - have_p)}")
+            if have_p - want_p:
+                problems.append(f"series in the file this writer would not write: "
+                                f"{sorted(have_p - want_p)}")
+        want_o, have_o = set(layout["observables"]), set(fl["observables"])
+        if want_o != have_o:
+            if want_o - have_o:
+                problems.append(f"observables not in the file: {sorted(want_o - have_o)}")
+            if have_o - want_o:
+                problems.append(f"observables in the file this writer would not write: "
+                                f"{sorted(have_o - want_o)}")
+        if layout["edges"] != fl["edges"]:
+            problems.append("box/edges " + ("missing from the file" if layout["edges"]
+                                            else "in the file but the cell is zero"))
+        if problems:
+            raise InputError("mode", "a", f"the same layout as {self.path}",
+                             hint="; ".join(problems)
+                             + "; pass per_particle/observables with None values to drop series, "
+                               "or write a new file")
+
+    # ------------------------------------------------------------ datasets
+    def _new_value(self, group, name, sample, unit=None, compress=True):
+        """Create ``group/name/value`` shaped (0, *sample.shape) and link step/time."""
+        sample = np.asarray(sample)
+        dtype = _storage_dtype(sample)
+        g = group.require_group(name)
+        kw = {}
+        if compress and self.compression is not None and sample.ndim >= 1:
+            kw["compression"] = self.compression
+        ds = g.create_dataset("value", shape=(0,) + sample.shape,
+                              maxshape=(None,) + sample.shape, dtype=dtype,
+                              chunks=_chunks(sample.shape, dtype.itemsize) if sample.ndim
+                              else (1024,), **kw)
+        if unit is not None:
+            ds.attrs["unit"] = unit
+        if "step" not in g:
+            g["step"] = self._step_ds
+        if "time" not in g:
+            g["time"] = self._time_ds
+        return ds
+
+    def _create_datasets(self, frame):
+        f = self._file
+        traj = f[_TRAJ]
+        pos = traj.require_group("position")
+        self._step_ds = pos.create_dataset("step", shape=(0,), maxshape=(None,),
+                                           dtype=np.int64, chunks=(1024,))
+        self._time_ds = pos.create_dataset("time", shape=(0,), maxshape=(None,),
+                                           dtype=np.float64, chunks=(1024,))
+        self._time_ds.attrs["unit"] = UNITS["time"]
+        self._new_value(traj, "position", frame["position"], UNITS["length"])
+        if "edges" in frame:
+            self._new_value(traj["box"], "edges", frame["edges"], UNITS["length"], compress=False)
+        self._new_value(traj, "velocity", frame["velocity"], UNITS["velocity"])
+        if "force" in frame:
+            self._new_value(traj, "force", frame["force"], UNITS["force"])
+        self._new_value(traj, "species", frame["species"])
+        self._new_value(traj, "mass", frame["mass"], UNITS["mass"])
+        for name, (_, unit) in self._layout["particles"].items():
+            self._new_value(traj, name, frame["particles"][name], unit)
+        if self._layout["observables"]:
+            obs = f.require_group("observables")
+            for name, (_, unit) in self._layout["observables"].items():
+                self._new_value(obs, name, frame["observables"][name], unit, compress=False)
+
+    def _value_datasets(self):
+        f = self._file
+        traj = f[_TRAJ]
+        out = [traj[k]["value"] for k in traj if k != "box" and isinstance(traj[k], _h5group())
+               and "value" in traj[k]]
+        if "edges" in traj["box"]:
+            out.append(traj["box/edges/value"])
+        if "observables" in f:
+            out += [f["observables"][k]["value"] for k in f["observables"]
+                    if "value" in f["observables"][k]]
+        return out
+
+    def _resize(self, n):
+        for ds in self._value_datasets():
+            ds.resize(n, axis=0)
+        self._step_ds.resize(n, axis=0)
+        self._time_ds.resize(n, axis=0)
+        self._nframes = n
+        self._last_step = int(self._step_ds[n - 1]) if n else None
+
+    def truncate_after_step(self, step):
+        """Drop every stored frame with ``step`` greater than ``step``.
+
+        Call it (or pass ``restart_step=``) before appending the frames of a
+        run restarted from a checkpoint taken at ``step``, so that the file
+        holds no frame twice.
+
+        Parameters
+        ----------
+        step : int
+            The last integration step to keep.
+
+        Returns
+        -------
+        int
+            Number of frames dropped.
+        """
+        if isinstance(step, bool) or not isinstance(step, (int, np.integer)):
+            raise InputError("step", step, "an integer integration step")
+        if self._nframes == 0:
+            return 0
+        steps = self._step_ds[:]
+        keep = int(np.searchsorted(steps, int(step), side="right"))
+        dropped = self._nframes - keep
+        if dropped:
+            self._resize(keep)
+            self._file.flush()
+        return dropped
+
+    # --------------------------------------------------------------- frames
+    def _sort_order(self, atoms):
+        if not self.sort_by_id or "id" not in atoms.arrays:
+            return None
+        ids = atoms.arrays["id"]
+        if ids.ndim != 1:
+            raise InputError("atoms.arrays['id']", f"shape {ids.shape}", "shape (N,)")
+        d = np.diff(ids)
+        if np.all(d > 0):
+            return None
+        order = np.argsort(ids, kind="stable")
+        if np.any(np.diff(ids[order]) == 0):
+            dup = ids[order][np.flatnonzero(np.diff(ids[order]) == 0)[0]]
+            raise InputError("atoms.arrays['id']", f"duplicate id {dup}",
+                             "unique particle ids (needed by sort_by_id=True)")
+        return order
+
+    def _warn_once(self, key, msg):
+        if key not in self._warned:
+            self._warned.add(key)
+            warnings.warn(msg, RuntimeWarning, stacklevel=3)
+
+    def _collect(self, atoms):
+        """All values of one frame, rows in output order, in file units."""
+        n = len(atoms)
+        if n != self.natoms:
+            raise InputError("atoms", f"{n} particles",
+                             f"{self.natoms} particles (H5MD frames need a fixed count)")
+        if not np.array_equal(np.asarray(atoms.pbc, dtype=bool), self._pbc):
+            raise InputError("atoms.pbc", atoms.pbc.tolist(),
+                             f"{self._pbc.tolist()} as when the writer was created")
+        layout = self._layout
+        order = self._sort_order(atoms)
+
+        def rows(a):
+            a = np.asarray(a)
+            return a if order is None else a[order]
+
+        frame = {"position": rows(atoms.positions).astype(np.float64),
+                 "velocity": rows(atoms.get_velocities()) * units.VEL_TO_A_PER_PS,
+                 "species": rows(atoms.numbers),
+                 "mass": rows(atoms.get_masses()).astype(np.float64)}
+        if layout["edges"]:
+            frame["edges"] = np.array(atoms.cell[:], dtype=np.float64)
+        elif np.any(np.asarray(atoms.cell[:]) != 0.0):
+            raise InputError("atoms.cell", atoms.cell.tolist(),
+                             "a zero cell, as at the first frame (no box/edges stored)")
+        if layout["force"]:
+            if atoms.calc is None:
+                self._warn_once("force", "H5MDWriter: atoms has no calculator any more; "
+                                         "writing NaN forces")
+                frame["force"] = np.full((n, 3), np.nan)
+            else:
+                frame["force"] = rows(_cached_property(atoms, "forces")) * units.FORCE_TO_KJMOL_A
+        parts = {}
+        for name, (src, _) in layout["particles"].items():
+            if isinstance(src, str):
+                if src not in atoms.arrays:
+                    raise InputError(f"per_particle[{name!r}]", src,
+                                     f"a key of atoms.arrays {sorted(atoms.arrays)}",
+                                     hint="the array disappeared during the run")
+                val = atoms.arrays[src]
+            else:
+                val = src(atoms)
+            val = np.asarray(val)
+            if val.dtype.kind not in "fiubc":
+                raise InputError(f"per_particle[{name!r}]", f"dtype {val.dtype}",
+                                 "a numeric or boolean array",
+                                 hint="drop it with per_particle={%r: None}" % name)
+            if val.ndim == 0 or val.shape[0] != n:
+                raise InputError(f"per_particle[{name!r}]", f"shape {val.shape}",
+                                 f"an array of shape ({n}, ...)")
+            parts[name] = rows(val)
+        frame["particles"] = parts
+        obs = {}
+        for name, (func, _) in layout["observables"].items():
+            if atoms.calc is None and name in ("potential_energy", "total_energy") \
+                    and func is _DEFAULT_OBSERVABLE_FUNCS[name][0]:
+                self._warn_once(name, f"H5MDWriter: no calculator; writing NaN {name}")
+                obs[name] = np.float64(np.nan)
+                continue
+            obs[name] = np.asarray(func(atoms))
+        frame["observables"] = obs
+        return frame
+
+    def _check_shapes(self, frame):
+        traj = self._file[_TRAJ]
+        items = [("position", frame["position"], traj), ("velocity", frame["velocity"], traj),
+                 ("species", frame["species"], traj), ("mass", frame["mass"], traj)]
+        if "force" in frame:
+            items.append(("force", frame["force"], traj))
+        items += [(k, v, traj) for k, v in frame["particles"].items()]
+        if frame["observables"]:
+            items += [(k, v, self._file["observables"]) for k, v in frame["observables"].items()]
+        for name, val, group in items:
+            want = group[name]["value"].shape[1:]
+            if np.shape(val) != want:
+                raise InputError(name, f"shape {np.shape(val)}",
+                                 f"shape {want} as in the first frame")
+
+    def write(self, *, step=None, time=None):
+        """Write one frame of ``self.atoms``.
+
+        Parameters
+        ----------
+        step : int, optional
+            Integration step; default ``dyn.nsteps`` or the frame counter.
+        time : float, optional
+            Simulation time in ASE units; default ``dyn.get_time()`` or
+            ``step * timestep``.
+
+        Returns
+        -------
+        int
+            Index of the frame written.
+        """
+        atoms = self.atoms
+        if self._file is None:
+            raise InputError("writer", self.path, "an open H5MDWriter", hint="it was closed")
+        if step is None:
+            if self.dyn is not None:
+                step = int(self.dyn.nsteps)
+            else:
+                step = 0 if self._last_step is None else self._last_step + 1
+        if time is None:
+            time = self.dyn.get_time() if self.dyn is not None else step * self.timestep
+        step = int(step)
+
+        if self._layout is None:
+            layout = self._make_layout(atoms)
+            if hasattr(self, "_file_layout"):
+                self._check_layout_against_file(layout)
+            self._layout = layout
+        frame = self._collect(atoms)
+
+        if self._last_step is not None and step < self._last_step:
+            raise InputError("step", step, f"a step >= {self._last_step}, the last one stored",
+                             hint="H5MD steps must increase; to restart from an earlier step use "
+                                  "H5MDWriter(..., mode='a', restart_step=...) or "
+                                  "truncate_after_step()")
+        if not hasattr(self, "_step_ds"):
+            self._create_datasets(frame)
+        else:
+            self._check_shapes(frame)
+
+        if self._last_step is not None and step == self._last_step:
+            i = self._nframes - 1        # same step again: replace, never duplicate
+        else:
+            i = self._nframes
+            for ds in self._value_datasets():
+                ds.resize(i + 1, axis=0)
+        f = self._file
+        traj = f[_TRAJ]
+        traj["position/value"][i] = frame["position"]
+        traj["velocity/value"][i] = frame["velocity"]
+        traj["species/value"][i] = frame["species"]
+        traj["mass/value"][i] = frame["mass"]
+        if "edges" in frame:
+            traj["box/edges/value"][i] = frame["edges"]
+        if "force" in frame:
+            traj["force/value"][i] = frame["force"]
+        for name, val in frame["particles"].items():
+            traj[name]["value"][i] = val
+        for name, val in frame["observables"].items():
+            f["observables"][name]["value"][i] = val
+        if i == self._nframes:
+            self._step_ds.resize(i + 1, axis=0)
+            self._time_ds.resize(i + 1, axis=0)
+        self._step_ds[i] = step
+        self._time_ds[i] = float(time) * units.TIME_TO_PS
+        self._nframes = i + 1
+        self._last_step = step
+        f.flush()
+        return i
+
+    __call__ = write
+
+    @property
+    def nframes(self):
+        """Number of frames stored."""
+        return self._nframes
+
+    def close(self):
+        """Flush and close the file (idempotent)."""
+        if self._file is not None:
+            self._file.flush()
+            self._file.close()
+            self._file = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def _h5group():
+    import h5py
+    return h5py.Group
+
+
+def _is_h5md_file(path):
+    import os
+    import h5py
+    if not os.path.isfile(path):
+        return False
+    try:
+        with h5py.File(path, "r") as f:
+            return _TRAJ in f
+    except OSError:
+        return False
+
+
+def _unit_factor(kind, ds, path):
+    unit = ds.attrs.get("unit")
+    if unit is None:
+        return 1.0
+    if isinstance(unit, bytes):
+        unit = unit.decode()
+    try:
+        return TO_ASE[kind][str(unit)]
+    except KeyError:
+        raise InputError(f"{ds.name} unit", str(unit), sorted(TO_ASE[kind]),
+                         hint=f"in {path}") from None
+
+
+class H5MDReader:
+    """Read frames of an H5MD file (ours or any with ``particles/<group>``) as ASE Atoms.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The H5MD file.  It is opened read-only without file locking, so a
+        file still being written by a running simulation can be inspected.
+
+    Attributes
+    ----------
+    n_frames : int
+    n_particles : int
+    steps : (F,) int64 ndarray
+    times : (F,) float64 ndarray, ASE time units
+    observables : list of str
+        Names under ``/observables``.
+    per_particle : list of str
+        Per-particle series other than position, velocity, force, species,
+        mass (e.g. ``id``, ``material``, ``grain``).
+
+    Examples
+    --------
+    >>> with H5MDReader('run.h5md') as r:                  # doctest: +SKIP
+    ...     atoms = r[-1]
+    ...     steps, times, epot = r.get_observable('potential_energy')
+    """
+
+    def __init__(self, path):
+        self.path = str(path)
+        what = "an H5MD file"
+        self._file = open_h5_read(self.path, what)
+        try:
+            if "particles" not in self._file or not len(self._file["particles"]):
+                raise InputError("path", self.path, what, hint="no /particles group")
+            self.group_name = "trajectory" if "trajectory" in self._file["particles"] \
+                else list(self._file["particles"])[0]
+            g = self._file["particles"][self.group_name]
+            self._g = g
+            self._elements = [k for k in g if k != "box" and isinstance(g[k], _h5group())
+                              and "value" in g[k]]
+            first = next((k for k in ("position", "velocity", "force") if k in g), None)
+            if first is None:
+                raise InputError("path", self.path, what,
+                                 hint=f"particles/{self.group_name} has no position, velocity "
+                                      "or force")
+            self._first = g[first]
+            self.n_frames = int(self._first["value"].shape[0])
+            self.n_particles = int(self._first["value"].shape[1])
+        except InputError:
+            self._file.close()
+            raise
+        except (KeyError, OSError, ValueError) as exc:
+            self._file.close()
+            raise InputError("path", self.path, what, hint=f"unreadable: {exc}") from None
+
+    # --------------------------------------------------------------- metadata
+    @property
+    def steps(self):
+        g = self._first
+        if "step" in g:
+            return np.asarray(g["step"][: self.n_frames], dtype=np.int64)
+        return np.arange(self.n_frames, dtype=np.int64)
+
+    @property
+    def times(self):
+        g = self._first
+        if "time" not in g:
+            return self.steps.astype(np.float64) * units.PS
+        return np.asarray(g["time"][: self.n_frames], dtype=np.float64) \
+            * _unit_factor("time", g["time"], self.path)
+
+    @property
+    def observables(self):
+        f = self._file
+        return list(f["observables"]) if "observables" in f else []
+
+    @property
+    def per_particle(self):
+        return [k for k in self._elements
+                if k not in ("position", "velocity", "force", "species", "mass")]
+
+    @property
+    def has(self):
+        """Which of position, velocity, force, species, mass, box edges are stored."""
+        out = {k: k in self._elements
+               for k in ("position", "velocity", "force", "species", "mass")}
+        out["edges"] = "box" in self._g and "edges" in self._g["box"]
+        return out
+
+    @property
+    def pbc(self):
+        if "box" not in self._g or "boundary" not in self._g["box"].attrs:
+            return np.zeros(3, dtype=bool)
+        b = self._g["box"].attrs["boundary"]
+        return np.array([(x.decode() if isinstance(x, bytes) else str(x)) == "periodic"
+                         for x in np.atleast_1d(b)], dtype=bool)
+
+    @property
+    def parameters(self):
+        """Scene parameters stored by the writer (dict) or None."""
+        return read_json_dataset(self._file.get("parameters"), "scene")
+
+    @property
+    def description(self):
+        """Dynamics description (``dyn.todict()``) stored by the writer, or None."""
+        return read_json_dataset(self._file.get("parameters"), "dynamics")
+
+    @property
+    def creator(self):
+        h = self._file.get("h5md")
+        if h is None or "creator" not in h:
+            return None
+        a = h["creator"].attrs
+        return {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in a.items()}
+
+    def units(self):
+        """``{series name: unit string}`` for every stored series that has one."""
+        out = {}
+        for k in self._elements:
+            u = self._g[k]["value"].attrs.get("unit")
+            if u is not None:
+                out[k] = u.decode() if isinstance(u, bytes) else str(u)
+        if "time" in self._first and "unit" in self._first["time"].attrs:
+            out["time"] = str(self._first["time"].attrs["unit"])
+        for k in self.observables:
+            g = self._file["observables"][k]
+            if isinstance(g, _h5group()) and "value" in g and "unit" in g["value"].attrs:
+                out[f"observables/{k}"] = str(g["value"].attrs["unit"])
+        return out
+
+    # ----------------------------------------------------------------- frames
+    def _index(self, frame):
+        n = self.n_frames
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) \
+                or not -n <= frame < n:
+            raise InputError("frame", frame, f"an integer in [{-n}, {n}) for {self.path}"
+                             if n else f"nothing: {self.path} has no frames")
+        return int(frame) % n
+
+    def get_observable(self, name):
+        """One observable over all frames, as stored.
+
+        Returns
+        -------
+        steps : (F,) int64 ndarray
+        times : (F,) float64 ndarray, ASE time units
+        values : (F, ...) ndarray, in the unit of ``units()['observables/<name>']``
+        """
+        if name not in self.observables:
+            raise InputError("name", name, f"one of {self.observables}")
+        g = self._file["observables"][name]
+        values = g["value"][:]
+        steps = g["step"][:] if "step" in g else self.steps
+        if "time" in g:
+            times = g["time"][:] * _unit_factor("time", g["time"], self.path)
+        else:
+            times = self.times
+        return np.asarray(steps), np.asarray(times), values
+
+    def get_atoms(self, frame=-1):
+        """Frame ``frame`` as :class:`ase.Atoms` in ASE units.
+
+        Positions, velocities (via momenta), masses, numbers, cell, pbc and
+        every extra per-particle series (``atoms.arrays``) of that frame;
+        stored forces and ``potential_energy`` are attached through a
+        :class:`~ase.calculators.singlepoint.SinglePointCalculator`.
+        ``atoms.info`` gets ``step``, ``time`` (ASE units) and ``frame``.
+        """
+        from ase import Atoms
+        from ase.calculators.singlepoint import SinglePointCalculator
+
+        i = self._index(frame)
+        g = self._g
+        try:
+            n = self.n_particles
+            numbers = g["species"]["value"][i] if "species" in self._elements \
+                else np.zeros(n, dtype=int)
+            if "position" in self._elements:
+                pos = g["position"]["value"][i].astype(np.float64) \
+                    * _unit_factor("length", g["position"]["value"], self.path)
+            else:
+                pos = np.zeros((n, 3))
+            cell = np.zeros((3, 3))
+            if "box" in g and "edges" in g["box"]:
+                e = g["box"]["edges"]
+                if isinstance(e, _h5group()):          # time-dependent box
+                    ev, edges = e["value"], e["value"][i]
+                else:                                  # fixed box
+                    ev, edges = e, e[()]
+                edges = np.asarray(edges, dtype=np.float64) * _unit_factor("length", ev, self.path)
+                cell = np.diag(edges) if edges.shape == (3,) else edges
+            atoms = Atoms(numbers=numbers, positions=pos, cell=cell, pbc=self.pbc)
+            if "mass" in self._elements:
+                atoms.set_masses(g["mass"]["value"][i].astype(np.float64))
+            if "velocity" in self._elements:
+                vel = g["velocity"]["value"][i].astype(np.float64) \
+                    * _unit_factor("velocity", g["velocity"]["value"], self.path)
+                atoms.set_velocities(vel)
+            for name in self.per_particle:
+                if name in atoms.arrays:
+                    continue
+                val = g[name]["value"]
+                if val.ndim >= 2 and val.shape[0] == self.n_frames and val.shape[1] == n:
+                    atoms.new_array(name, val[i])
+            results = {}
+            if "force" in self._elements:
+                results["forces"] = g["force"]["value"][i].astype(np.float64) \
+                    * _unit_factor("force", g["force"]["value"], self.path)
+            if "potential_energy" in self.observables:
+                ov = self._file["observables"]["potential_energy"]
+                if isinstance(ov, _h5group()) and "value" in ov and ov["value"].shape[0] > i:
+                    results["energy"] = float(ov["value"][i]) \
+                        * _unit_factor("energy", ov["value"], self.path)
+            if results:
+                atoms.calc = SinglePointCalculator(atoms, **results)
+            atoms.info["step"] = int(self.steps[i])
+            atoms.info["time"] = float(self.times[i])
+            atoms.info["frame"] = i
+        except InputError:
+            raise
+        except (KeyError, OSError, ValueError, IndexError) as exc:
+            raise InputError("path", self.path, "a readable H5MD file",
+                             hint=f"frame {i}: {exc}") from None
+        return atoms
+
+    def __len__(self):
+        return self.n_frames
+
+    def __getitem__(self, frame):
+        return self.get_atoms(frame)
+
+    def __iter__(self):
+        for i in range(self.n_frames):
+            yield self.get_atoms(i)
+
+    def close(self):
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_h5md(path, frame=-1):
+    """Read one frame of an H5MD file as :class:`ase.Atoms` (ASE units).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        H5MD file (e.g. written by :class:`H5MDWriter`).
+    frame : int
+        Frame index; negative counts from the end (default: last frame).
+
+    Returns
+    -------
+    ase.Atoms
+        Positions (Å), velocities (Å per ASE time, via momenta), masses
+        (amu), numbers, cell, pbc, ``arrays`` for every stored extra
+        per-particle series (``id``, ``material``, ...), forces (eV/Å) and
+        potential energy (eV) on a SinglePointCalculator when stored, and
+        ``info['step']``, ``info['time']`` (ASE units), ``info['frame']``.
+        With ``sort_by_id`` the rows are in increasing id order.
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        Missing or unreadable file, not H5MD, frame out of range, unknown
+        unit string.
+    """
+    with H5MDReader(path) as reader:
+        return reader.get_atoms(frame)

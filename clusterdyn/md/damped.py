@@ -1,0 +1,269 @@
+"""DampedVerlet: velocity Verlet with the anti-dusting pair damping of CD eq. (6).
+
+.. math::
+
+    m \\dot v_i = \\sum_k f(r_k - r_i) - \\sum_k \\eta_{ik} (v_i - v_k),
+    \\qquad \\eta = m\\Gamma,\\ \\Gamma = c_0/(J a)
+
+for pairs within the cutoff.  The damping force is evaluated in the same
+pair loop as the conservative one (one neighbour walk per step) with the
+half-step velocities of velocity Verlet, like LAMMPS' dpd/ext/tstat at zero
+temperature.  With ``J=None`` the dynamics runs the conservative kernel only:
+the damping term is not in the compiled loop at all.
+"""
+
+import math
+import time
+
+import numpy as np
+from ase.md.md import MolecularDynamics
+
+from ..calculators.cluster import ClusterDynamics
+from ..errors import InputError, InstabilityError
+from . import _integrate as I
+from .boundaries import Piston
+
+#: default time step as a fraction of r0/(c0 + u_max); see :func:`default_timestep`
+TIMESTEP_FACTOR = 0.03
+#: a particle moving more than this many r0 in one step stops the run
+MAX_STEP_DISPLACEMENT = 0.25
+
+
+def stability_limit(calc, r_over_r0=1.0):
+    """Velocity-Verlet stability limit of an fcc cluster lattice, ASE time.
+
+    ``dt_max = 2/omega_max`` with ``omega_max^2 = 8 k/m`` (k = -f'(r) at the
+    given r/r0, 1 = at rest), the smallest over the materials.  About
+    0.58 r0/c0 at rest; it shrinks as compression stiffens the bonds.
+    """
+    lim = math.inf
+    for p in calc.potentials:
+        k = float(p.stiffness(r_over_r0 * p.r0))
+        if k > 0:
+            lim = min(lim, 2.0 / math.sqrt(8.0 * k / p.mass))
+    return lim
+
+
+def default_timestep(calc, u_max=0.0, factor=TIMESTEP_FACTOR):
+    """``factor * min(r0 / (c0 + u_max))`` over the materials (ASE time).
+
+    The default factor 0.03 is 1/19 of the stability limit at rest
+    (:func:`stability_limit`, 0.58 r0/c0).  The margin is set by accuracy,
+    not stability: velocity Verlet's energy error is an O((omega dt)^2)
+    offset, and 0.03 keeps it below 1e-3 of the kinetic energy of a thermal
+    lattice (0.1 would give 0.75%).  At u = 3 km/s in aluminium it gives
+    0.019 r0/c0, the step of the method's reference runs; the ``u_max`` term
+    keeps the margin in shocks, where compression raises the sound speed
+    (measured by ``clusterdyn study stability``).
+    """
+    return factor * min(p.r0 / (p.c0 + abs(u_max)) for p in calc.potentials)
+
+
+class DampedVerlet(MolecularDynamics):
+    """Velocity Verlet for clusters, with optional pair damping (CD eq. 5-6).
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        With a :class:`~clusterdyn.calculators.ClusterDynamics` calculator (any ASE
+        calculator works when ``J=None``).
+    timestep : float, optional
+        ASE time units.  Default :func:`default_timestep` with the fastest
+        piston of ``atoms.constraints``.  Must be below the stability limit.
+    J : float or None, default 50
+        Damping Gamma = c0/(J r0), J in 10..100 in the method; ``None`` = off.
+    check_interval : int, default 1
+        Steps between stiffness checks (time step against the limit at the
+        current smallest pair distance).
+    trajectory, logfile, loginterval :
+        As for ASE's MolecularDynamics.
+
+    Attributes
+    ----------
+    forces : (N, 3) array
+        Total forces of the last step (with damping if on; piston rows zeroed).
+    potential_energy : float
+        Shifted pair energy of the last step, eV.
+    """
+
+    def __init__(self, atoms, timestep=None, J=50, *, check_interval=1, trajectory=None,
+                 logfile=None, loginterval=1, **kwargs):
+        calc = atoms.calc
+        if J is not None:
+            try:
+                J = float(J)
+            except (TypeError, ValueError):
+                raise InputError("J", J, "a positive number (Gamma = c0/(J r0)) or None for no damping") from None
+            if not (J > 0 and math.isfinite(J)):
+                raise InputError("J", J, "a positive number (Gamma = c0/(J r0)) or None for no damping")
+        if isinstance(calc, ClusterDynamics):
+            calc.setup(atoms)
+        elif J is not None:
+            raise InputError("atoms.calc", type(calc).__name__,
+                             "a ClusterDynamics calculator when damping is on (J given)")
+        self.J = J
+        self.calc = calc
+        u_max = max([np.linalg.norm(c.velocity) for c in atoms.constraints if isinstance(c, Piston)]
+                    + [0.0])
+        self.stability_limit = stability_limit(calc) if isinstance(calc, ClusterDynamics) else None
+        if timestep is None:
+            if not isinstance(calc, ClusterDynamics):
+                raise InputError("timestep", None, "a time step (no default without ClusterDynamics)")
+            timestep = default_timestep(calc, u_max)
+        try:
+            ts = float(timestep)
+        except (TypeError, ValueError):
+            raise InputError("timestep", timestep, "a positive time (ASE units)") from None
+        if not (ts > 0 and math.isfinite(ts)):
+            raise InputError("timestep", timestep, "a positive time (ASE units)")
+        if self.stability_limit is not None and ts > self.stability_limit:
+            raise InputError("timestep", ts, f"<= {self.stability_limit:.6g} (velocity-Verlet stability "
+                             "limit 2/omega_max of the lattice at rest)",
+                             hint=f"the default is {default_timestep(calc, u_max):.6g}")
+        super().__init__(atoms, ts, trajectory=trajectory, logfile=logfile, loginterval=loginterval,
+                         **kwargs)
+        self.check_interval = int(check_interval)
+        self.forces = None
+        self.potential_energy = None
+        self._eta = calc.damping_matrix(J) if J is not None else None
+        self._v2 = None
+        self.timings = {"forces": 0.0, "integrate": 0.0}
+
+    def todict(self):
+        d = super().todict()
+        d.update({"J": self.J, "stability_limit": self.stability_limit})
+        return d
+
+    def _invm(self):
+        m = self.atoms.get_masses()
+        if np.any(m <= 0):
+            raise InputError("masses", m[m <= 0][:3].tolist(), "positive masses")
+        return 1.0 / m
+
+    def _compute_forces(self):
+        atoms = self.atoms
+        t0 = time.perf_counter()
+        if isinstance(self.calc, ClusterDynamics):
+            damping = None
+            if self._eta is not None:
+                damping = (atoms.arrays["momenta"], self._invm_n, self._eta)
+            out = self.calc.compute(atoms, damping=damping, step=self.nsteps)
+            forces = out["forces"]
+            self.potential_energy = out["energy"]
+            if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
+                self._check_stiffness()
+        else:
+            forces = atoms.get_forces(apply_constraint=False)
+            self.potential_energy = atoms.get_potential_energy()
+        for c in atoms.constraints:
+            c.adjust_forces(atoms, forces)
+        self.timings["forces"] += time.perf_counter() - t0
+        return forces
+
+    def _check_stiffness(self):
+        st = self.calc.last_stats
+        x = st["min_r_over_r0"]
+        if x >= 1.0 or not math.isfinite(x):
+            return
+        lim = stability_limit(self.calc, x)
+        if self.dt > lim:
+            raise InstabilityError(
+                "time step above the stability limit at the current compression "
+                f"(closest pair at r = {x:.3f} r0); lower the time step", step=self.nsteps,
+                particles=st["closest"], quantity="timestep", value=self.dt, limit=lim)
+
+    def _refresh_properties(self):
+        # forces are kept by the dynamics; observers that need ASE properties ask the calculator
+        if self.forces is None:
+            self._invm_n = self._invm()
+            self.forces = self._compute_forces()
+
+    def step(self, forces=None):
+        atoms = self.atoms
+        if self.forces is None or forces is not None:
+            self._invm_n = self._invm()
+            self.forces = self._compute_forces() if forces is None else forces
+        invm = self._invm_n
+        t0 = time.perf_counter()
+        p = atoms.arrays["momenta"]
+        h = 0.5 * self.dt
+        I.kick(p, self.forces, h)
+        for c in atoms.constraints:
+            c.adjust_momenta(atoms, p)
+        if self._v2 is None or len(self._v2) != len(atoms):
+            self._v2 = np.empty(len(atoms))
+        if atoms.constraints and not all(isinstance(c, Piston) for c in atoms.constraints):
+            new = atoms.positions + self.dt * p * invm[:, None]
+            atoms.set_positions(new)
+            v2 = (p * p).sum(axis=1) * invm ** 2
+            k = int(np.argmax(v2))
+            v2max = v2[k]
+        else:
+            v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt, self._v2)
+        self._check_speed(v2max, k)
+        self.timings["integrate"] += time.perf_counter() - t0
+        self.forces = self._compute_forces()
+        t0 = time.perf_counter()
+        I.kick(p, self.forces, h)
+        for c in atoms.constraints:
+            c.adjust_momenta(atoms, p)
+        self.timings["integrate"] += time.perf_counter() - t0
+        return self.forces
+
+    def _check_speed(self, v2max, k):
+        if not math.isfinite(v2max):
+            raise InstabilityError("non-finite velocity", step=self.nsteps + 1, particles=(k,),
+                                   quantity="speed", value=float("nan"))
+        if isinstance(self.calc, ClusterDynamics):
+            r0 = min(p.r0 for p in self.calc.potentials)
+            disp = math.sqrt(v2max) * self.dt
+            if disp > MAX_STEP_DISPLACEMENT * r0:
+                raise InstabilityError(
+                    "a particle moves too far in one step for the pair forces to be resolved; "
+                    "lower the time step", step=self.nsteps + 1, particles=(k,),
+                    quantity="displacement per step / r0", value=disp / r0, limit=MAX_STEP_DISPLACEMENT)
+
+    def run(self, steps=50, progress=False, desc=None):
+        """Run ``steps`` steps; ``progress=True`` shows a tqdm bar with time left."""
+        if not progress:
+            return super().run(steps)
+        from tqdm.auto import tqdm
+        with tqdm(total=steps, desc=desc or type(self).__name__, unit="step", leave=False) as bar:
+            conv = steps == 0
+            for i, conv in enumerate(self.irun(steps)):
+                if i:
+                    bar.update(1)
+        return conv
+
+    def get_kinetic_energy(self):
+        return I.kinetic(self.atoms.arrays["momenta"], self._invm())
+
+    def get_total_energy(self):
+        """Kinetic + (shifted) potential energy of the current step, eV."""
+        if self.potential_energy is None:
+            self._refresh_properties()
+        return self.get_kinetic_energy() + self.potential_energy
+
+    # -- checkpoint state ------------------------------------------------------------
+    def get_state(self):
+        """Everything a bit-identical restart needs besides the Atoms."""
+        nl = getattr(self.calc, "nl", None)
+        st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J,
+              "constraints": [c.get_state() for c in self.atoms.constraints if hasattr(c, "get_state")]}
+        if nl is not None and nl.ref_nc is not None:
+            st["nl_ref"] = nl.ref_nc.copy()
+        if self.forces is not None:
+            st["forces"] = self.forces.copy()
+            st["potential_energy"] = self.potential_energy
+        return st
+
+    def set_state(self, st):
+        self.nsteps = int(st["nsteps"])
+        self.dt = float(st["dt"])
+        nl = getattr(self.calc, "nl", None)
+        if nl is not None and "nl_ref" in st:
+            nl.build(np.asarray(st["nl_ref"]), self.atoms.cell.array, self.atoms.pbc)
+        if "forces" in st:
+            self._invm_n = self._invm()
+            self.forces = np.array(st["forces"])
+            self.potential_energy = float(st["potential_energy"])
