@@ -1,0 +1,15 @@
+"""Input/output: H5MD trajectories (MDAnalysis-readable), checkpoints, file summaries.
+
+- :class:`H5MDWriter` -- ASE dynamics observer writing H5MD 1.1
+  (``particles/trajectory``; units MDAnalysis accepts).
+- :class:`H5MDReader`, :func:`read_h5md` -- frames back as :class:`ase.Atoms`.
+- :func:`h5md_info`, :func:`format_info` -- what ``clusterdyn info FILE`` shows.
+- :func:`write_checkpoint`, :func:`read_checkpoint` -- bit-exact restart files.
+"""
+
+from clusterdyn.io.h5md import H5MDWriter, H5MDReader, read_h5md
+from clusterdyn.io.info import h5md_info, format_info
+from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint
+
+__all__ = ["H5MDWriter", "H5MDReader", "read_h5md", "h5md_info", "format_info",
+           "write_checkpoint", "read_checkpoint"]

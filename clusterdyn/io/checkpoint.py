@@ -1,0 +1,384 @@
+"""Checkpoint and restart: the full state of a run in one HDF5 file, bit for bit.
+
+:func:`write_checkpoint` stores an :class:`ase.Atoms` (every ``atoms.arrays``
+entry with its own dtype, cell, pbc, the encodable part of ``atoms.info``,
+ASE constraints that have ``todict``) plus a nested ``state`` dict (pair
+state, RNG state, step, time, neighbour-list reference positions, scene
+parameters, ...).  :func:`read_checkpoint` gives both back; float64 arrays
+and Python floats come back with identical bits.
+
+File layout::
+
+    /                 +format 'clusterdyn-checkpoint', +format_version 1, +creator
+    /atoms            +natoms
+        cell          (3, 3) float64, Angstrom
+        pbc           (3,) bool
+        arrays/<name> every atoms.arrays entry (positions Angstrom, numbers,
+                      momenta amu*Angstrom/ASE-time, masses amu, id, material, ...)
+        info/...      atoms.info, encoded like the state
+        constraints   JSON text of [c.todict(), ...] (only when there are some)
+    /state/...        the state dict
+
+Every node of an encoded dict carries a ``kind`` attribute: ``dict``,
+``list``, ``tuple``, ``ndarray``, ``npscalar``, ``int``, ``bigint``
+(integers beyond int64, stored as decimal text: PCG64 states are 128-bit),
+``float``, ``bool``, ``str``, ``bytes``, ``none``, ``list_float``,
+``list_int``, ``list_str`` (homogeneous lists stored as one dataset),
+``generator`` (a :class:`numpy.random.Generator`, restored with its bit
+generator state) and ``randomstate``.
+
+The file is written to a temporary file in the destination folder, synced,
+then moved over ``path`` with :func:`os.replace`, so ``path`` always holds a
+complete checkpoint (the previous one or the new one).  Arrays carry a
+Fletcher-32 checksum, so damaged data are detected on reading.
+"""
+
+import json
+import os
+import tempfile
+import warnings
+
+import numpy as np
+
+from clusterdyn.errors import InputError
+from clusterdyn.io._common import clusterdyn_version, open_h5_read
+
+__all__ = ["write_checkpoint", "read_checkpoint", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "clusterdyn-checkpoint"
+FORMAT_VERSION = 1
+
+_ALLOWED = ("dict (str or int keys), list, tuple, str, bytes, int, float, bool, None, "
+            "numpy array (numeric, bool or str), numpy scalar, numpy Generator/RandomState")
+_INT64 = np.iinfo(np.int64)
+
+
+class _Unencodable(InputError):
+    pass
+
+
+def _node_name(key, where):
+    if isinstance(key, bool) or not isinstance(key, (str, int, np.integer)):
+        raise _Unencodable(f"key of {where}", key, "str or int dict keys")
+    name = str(int(key)) if not isinstance(key, str) else key
+    if not name or "/" in name or name in (".", ".."):
+        raise _Unencodable(f"key of {where}", key, "a non-empty key without '/'")
+    return name, not isinstance(key, str)
+
+
+def _put(group, name, value, where):
+    """Encode ``value`` as ``group[name]`` (dataset or group) with a ``kind`` attribute."""
+    import h5py
+
+    def ds(data, kind, **kw):
+        d = group.create_dataset(name, data=data, **kw)
+        d.attrs["kind"] = kind
+        return d
+
+    if value is None:
+        return ds(h5py.Empty("f8"), "none")
+    if isinstance(value, np.random.Generator):
+        g = group.create_group(name, track_order=True)
+        g.attrs["kind"] = "generator"
+        _put(g, "state", value.bit_generator.state, f"{where}.bit_generator.state")
+        return g
+    if isinstance(value, np.random.RandomState):
+        g = group.create_group(name, track_order=True)
+        g.attrs["kind"] = "randomstate"
+        _put(g, "state", value.get_state(legacy=False), f"{where}.get_state()")
+        return g
+    if isinstance(value, np.ndarray):
+        kind = value.dtype.kind
+        if kind in "fiubc":
+            kw = {}
+            if value.ndim >= 1 and value.size > 0:
+                kw = {"chunks": True, "fletcher32": True}
+            return ds(value, "ndarray", **kw)
+        if kind == "U":
+            d = ds(np.array(value.ravel().tolist(), dtype=h5py.string_dtype()), "ndarray_str")
+            d.attrs["shape"] = np.array(value.shape, dtype=np.int64)
+            return d
+        raise _Unencodable(where, f"array of dtype {value.dtype}", _ALLOWED)
+    if isinstance(value, np.generic):
+        if value.dtype.kind in "fiubc":
+            return ds(value, "npscalar")
+        value = value.item()              # np.str_, np.bytes_ -> str, bytes
+    if isinstance(value, bool):
+        return ds(np.bool_(value), "bool")
+    if isinstance(value, int):
+        if _INT64.min <= value <= _INT64.max:
+            return ds(np.int64(value), "int")
+        return ds(str(value), "bigint")
+    if isinstance(value, float):
+        return ds(np.float64(value), "float")
+    if isinstance(value, str):
+        return ds(value, "str", dtype=h5py.string_dtype())
+    if isinstance(value, (bytes, bytearray)):
+        return ds(np.frombuffer(bytes(value), dtype=np.uint8), "bytes")
+    if isinstance(value, dict):
+        g = group.create_group(name, track_order=True)
+        g.attrs["kind"] = "dict"
+        for k, v in value.items():
+            child, int_key = _node_name(k, where)
+            node = _put(g, child, v, f"{where}[{k!r}]")
+            if int_key:
+                node.attrs["keytype"] = "int"
+        return g
+    if isinstance(value, (list, tuple)):
+        kind = "list" if isinstance(value, list) else "tuple"
+        if kind == "list" and value:
+            if all(type(v) is float for v in value):
+                return ds(np.array(value, dtype=np.float64), "list_float")
+            if all(type(v) is int and _INT64.min <= v <= _INT64.max for v in value):
+                return ds(np.array(value, dtype=np.int64), "list_int")
+            if all(type(v) is str for v in value):
+                return ds(np.array(value, dtype=h5py.string_dtype()), "list_str")
+        g = group.create_group(name, track_order=True)
+        g.attrs["kind"] = kind
+        g.attrs["length"] = len(value)
+        for i, v in enumerate(value):
+            _put(g, str(i), v, f"{where}[{i}]")
+        return g
+    raise _Unencodable(where, f"{type(value).__name__} object", _ALLOWED)
+
+
+def _attr_str(node, key):
+    v = node.attrs[key]
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _get(node):
+    """Decode a node written by :func:`_put`."""
+    kind = _attr_str(node, "kind")
+    if kind == "none":
+        return None
+    if kind == "dict":
+        out = {}
+        for name in node:
+            child = node[name]
+            key = int(name) if child.attrs.get("keytype") in ("int", b"int") else name
+            out[key] = _get(child)
+        return out
+    if kind in ("list", "tuple"):
+        n = int(node.attrs["length"])
+        items = [_get(node[str(i)]) for i in range(n)]
+        return items if kind == "list" else tuple(items)
+    if kind == "generator":
+        state = _get(node["state"])
+        bitgen = getattr(np.random, state["bit_generator"])()
+        bitgen.state = state
+        return np.random.Generator(bitgen)
+    if kind == "randomstate":
+        rs = np.random.RandomState()
+        rs.set_state(_get(node["state"]))
+        return rs
+    if kind == "ndarray":
+        return node[()] if node.shape != () else np.array(node[()])
+    if kind == "ndarray_str":
+        flat = node.asstr()[()]
+        return np.array(list(flat), dtype=str).reshape(tuple(node.attrs["shape"]))
+    if kind == "npscalar":
+        return node[()]
+    if kind == "bool":
+        return bool(node[()])
+    if kind == "int":
+        return int(node[()])
+    if kind == "bigint":
+        return int(node.asstr()[()])
+    if kind == "float":
+        return float(node[()])
+    if kind == "str":
+        return node.asstr()[()]
+    if kind == "bytes":
+        return np.asarray(node[()], dtype=np.uint8).tobytes()
+    if kind == "list_float":
+        return [float(x) for x in node[()]]
+    if kind == "list_int":
+        return [int(x) for x in node[()]]
+    if kind == "list_str":
+        return list(node.asstr()[()])
+    raise ValueError(f"unknown kind {kind!r} at {node.name}")
+
+
+def _write_atoms(group, atoms):
+    group.attrs["natoms"] = len(atoms)
+    group.create_dataset("cell", data=np.asarray(atoms.cell[:], dtype=np.float64))
+    group.create_dataset("pbc", data=np.asarray(atoms.pbc, dtype=bool))
+    arrays = group.create_group("arrays", track_order=True)
+    for name, a in atoms.arrays.items():
+        _put(arrays, _node_name(name, "atoms.arrays")[0], np.asarray(a), f"atoms.arrays[{name!r}]")
+    info = group.create_group("info", track_order=True)
+    info.attrs["kind"] = "dict"
+    for key, value in atoms.info.items():
+        try:
+            child, int_key = _node_name(key, "atoms.info")
+            node = _put(info, child, value, f"atoms.info[{key!r}]")
+            if int_key:
+                node.attrs["keytype"] = "int"
+        except _Unencodable as exc:
+            if isinstance(key, str) and key in info:
+                del info[key]
+            warnings.warn(f"write_checkpoint: atoms.info[{key!r}] not stored ({exc})",
+                          RuntimeWarning, stacklevel=3)
+    dicts = []
+    for c in atoms.constraints:
+        try:
+            dicts.append(c.todict())
+        except Exception:
+            warnings.warn(f"write_checkpoint: constraint {type(c).__name__} has no todict(); "
+                          "not stored (restore it from the state)", RuntimeWarning, stacklevel=3)
+    if dicts:
+        from clusterdyn.io._common import to_jsonable
+        group.create_dataset("constraints", data=json.dumps(to_jsonable(dicts)))
+
+
+def _read_atoms(group):
+    from ase import Atoms
+
+    arrays = {name: _get(group["arrays"][name]) for name in group["arrays"]}
+    n = int(group.attrs["natoms"])
+    for name, a in arrays.items():
+        if len(a) != n:
+            raise ValueError(f"atoms.arrays[{name!r}] has {len(a)} rows, expected {n}")
+    atoms = Atoms(numbers=arrays.pop("numbers"), positions=arrays.pop("positions"),
+                  cell=group["cell"][()], pbc=group["pbc"][()])
+    for name, a in arrays.items():
+        atoms.arrays[name] = a
+    atoms.info = _get(group["info"])
+    if "constraints" in group:
+        from ase.constraints import dict2constraint
+        raw = group["constraints"][()]
+        for d in json.loads(raw.decode() if isinstance(raw, bytes) else raw):
+            try:
+                atoms.constraints = list(atoms.constraints) + [dict2constraint(d)]
+            except Exception as exc:
+                warnings.warn(f"read_checkpoint: constraint {d.get('name')} not restored ({exc})",
+                              RuntimeWarning, stacklevel=3)
+    return atoms
+
+
+def write_checkpoint(path, atoms, state=None):
+    """Write ``atoms`` and ``state`` to the checkpoint file ``path``, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination; its folder must exist.  An existing file is replaced
+        only once the new one is complete.
+    atoms : ase.Atoms
+        Every ``atoms.arrays`` entry is stored with its dtype and bits
+        (positions in Angstrom, momenta in amu*Angstrom/ASE-time, masses in
+        amu if set, numbers, id, material, ...), plus cell, pbc, the
+        encodable entries of ``atoms.info`` (others are skipped with a
+        warning) and constraints that have ``todict()``.  The calculator is
+        not stored.
+    state : dict, optional
+        Nested dict (str or int keys) of numpy arrays, numpy scalars,
+        Python scalars (ints of any size), str, bytes, None, lists, tuples,
+        dicts and numpy Generators; e.g. ``{'step': 1200, 'time': t,
+        'pairs': {'i': i_p, 'j': j_p, 'linked': s_p}, 'rng':
+        rng.bit_generator.state, 'nl_reference_positions': r_nc}``.
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        ``state`` is not a dict or holds a value of another type (the
+        message names where), or the folder of ``path`` does not exist.
+    """
+    import h5py
+
+    if state is None:
+        state = {}
+    if not isinstance(state, dict):
+        raise InputError("state", type(state).__name__, "a dict")
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError("path", path, "a file in an existing folder",
+                         hint=f"folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
+                               dir=folder)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w", track_order=True) as f:
+            f.attrs["format"] = FORMAT
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["creator"] = f"clusterdyn {clusterdyn_version()}"
+            _write_atoms(f.create_group("atoms", track_order=True), atoms)
+            st = f.create_group("state", track_order=True)
+            st.attrs["kind"] = "dict"
+            for key, value in state.items():
+                child, int_key = _node_name(key, "state")
+                node = _put(st, child, value, f"state[{key!r}]")
+                if int_key:
+                    node.attrs["keytype"] = "int"
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    try:                                  # make the rename itself durable
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:  # pragma: no cover - platforms without directory fsync
+        pass
+
+
+def read_checkpoint(path):
+    """Read a checkpoint written by :func:`write_checkpoint`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    atoms : ase.Atoms
+        With every stored array, cell, pbc, info and constraints (no calculator).
+    state : dict
+        The state as written (numpy Generators restored as Generators that
+        continue the same random stream).
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        The file is missing, not HDF5, truncated or corrupt, not a
+        clusterdyn checkpoint (e.g. an H5MD trajectory), or from a newer
+        format version; the message names the path and the problem.
+    """
+    path = os.fspath(path)
+    what = "a clusterdyn checkpoint file"
+    f = open_h5_read(path, what)
+    try:
+        fmt = f.attrs.get("format")
+        if isinstance(fmt, bytes):
+            fmt = fmt.decode()
+        if fmt != FORMAT:
+            hint = "not a clusterdyn checkpoint"
+            if "h5md" in f or "particles" in f:
+                hint += " (it is an H5MD trajectory; read it with clusterdyn.io.read_h5md)"
+            else:
+                hint += f" (format attribute {fmt!r})"
+            raise InputError("path", path, what, hint=hint)
+        version = int(f.attrs.get("format_version", -1))
+        if not 1 <= version <= FORMAT_VERSION:
+            raise InputError("path", path, what,
+                             hint=f"format_version {version}; this clusterdyn reads 1 to "
+                                  f"{FORMAT_VERSION}")
+        try:
+            atoms = _read_atoms(f["atoms"])
+            state = _get(f["state"])
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError("path", path, what,
+                             hint=f"corrupt or incomplete checkpoint: {type(exc).__name__}: "
+                                  f"{exc}") from None
+    finally:
+        f.close()
+    return atoms, state
