@@ -63,7 +63,7 @@ MIN_GRAIN_SIZE = 3.0
 #: default minimum distance at grain boundaries, in r0
 DEFAULT_D_MIN = 0.85
 #: range of d_min (in r0) searched for a target porosity
-D_MIN_RANGE = (0.5, 1.1)
+D_MIN_RANGE = (0.6, 1.1)
 #: same-grain pairs closer than this (in r0) are defects (a grain meeting its own periodic image)
 _SAME_GRAIN_TOL = 0.99
 
@@ -223,7 +223,7 @@ def _fill_grains(r0, seeds, rots, lo, hi, pbc, cells):
     pos_list, grain_list = [], []
     L = hi - lo
     for g, (clo, chi, nb) in enumerate(cells):
-        pts = fcc_sites(r0, rots[g], clo - 1e-6 * r0, chi + 1e-6 * r0)
+        pts = fcc_sites(r0, rots[g], clo, chi + 1e-6 * r0)
         if len(pts) and len(nb):
             s = seeds[g]
             # p in cell g  <=>  2 p.(n - s) < |n|^2 - |s|^2 for every Voronoi neighbour n

@@ -11,6 +11,7 @@ from ..errors import InputError, InstabilityError
 from ..materials import get_material
 from ..neighbors import NeighborList
 from ..potentials import DEFAULT_RC, ClusterPotential, MixedPairPotential, build_tables, check_rc
+from ..parallel import use_threads
 from . import _cd_kernels as K
 
 #: arrays besides ASE's own whose change invalidates cached results
@@ -134,7 +135,7 @@ class ClusterDynamics(Calculator):
         return mid
 
     def _bufs(self, n, per_particle):
-        nk = max(1, min(numba.get_num_threads(), max(1, n // 64)))
+        nk = use_threads(n)
         b = self._buffers
         if b is None or b["n"] != n or b["nk"] != nk:
             b = {"n": n, "nk": nk, "f_knc": np.empty((nk, n, 3)), "stat_k": np.empty((nk, 5)),

@@ -61,7 +61,9 @@ def open_h5_read(path, what):
     try:
         try:
             return h5py.File(path, "r", locking=False)
-        except TypeError:  # pragma: no cover - h5py without the locking keyword
+        except (TypeError, OSError):
+            # h5py without the keyword, or the file is already open in this
+            # process with locking on (HDF5 then refuses other locking flags)
             return h5py.File(path, "r")
     except OSError as exc:
         raise InputError("path", str(path), what,

@@ -21,14 +21,20 @@ File layout (``N`` particles, ``F`` frames)::
                                                          (id, material, grain, radius, ...)
                                                          and every ``per_particle`` series,
                                                          in ASE units as given
-    /observables/<name>/{step,time,value (F, ...)}      kinetic_energy, potential_energy,
-                                                         total_energy ('kJ mol-1') + user ones
+    /observables/<name>/{step,time,value (F, ...)}      dt ('ps'), kinetic_energy,
+                                                         potential_energy, total_energy
+                                                         ('kJ mol-1') + user ones
     /parameters/scene          JSON text of ``parameters=``
     /parameters/dynamics       JSON text of ``dyn.todict()`` (``set_description``)
 
 ``step`` (int64) and ``time`` (float64, 'ps') exist once, in ``position``,
 and are hard-linked into every other time-dependent group (as MDAnalysis's
 own writer does), so every series has exactly the frames of ``position``.
+
+``observables/dt`` holds, for each frame, the time since the previous frame
+in ps (frame 0 gets the value of frame 1).  MDAnalysis' H5MD reader has no
+other source for ``Timestep.dt`` (it would warn and assume 1 ps); it takes
+``ts.data['dt']``, which this observable provides.
 
 Positions and images
 --------------------
@@ -99,8 +105,8 @@ TO_ASE = {
 RESERVED = ("box", "position", "velocity", "force", "species", "mass", "image")
 #: atoms.arrays entries written through dedicated groups (never as extras)
 STANDARD_ARRAYS = ("positions", "numbers", "momenta", "masses")
-#: the default observables
-DEFAULT_OBSERVABLES = ("kinetic_energy", "potential_energy", "total_energy")
+#: the default observables (``dt`` is the frame spacing in ps, read by MDAnalysis as Timestep.dt)
+DEFAULT_OBSERVABLES = ("dt", "kinetic_energy", "potential_energy", "total_energy")
 
 _TRAJ = "particles/trajectory"
 _MAX_CHUNK_BYTES = 1 << 20
@@ -211,10 +217,10 @@ class H5MDWriter:
     observables : dict, optional
         Scalar or small-vector observables ``{name: callable(atoms)}`` or
         ``{name: (callable(atoms), unit_string)}``, stored as returned under
-        ``/observables/<name>``.  They are added to the default set,
-        ``kinetic_energy`` always and ``potential_energy``, ``total_energy``
-        when a calculator is attached (all in 'kJ mol-1'); a value of None
-        removes a default.
+        ``/observables/<name>``.  They are added to the default set:
+        ``dt`` (frame spacing, 'ps') and ``kinetic_energy`` always,
+        ``potential_energy`` and ``total_energy`` when a calculator is
+        attached (energies in 'kJ mol-1'); a value of None removes a default.
     per_particle : dict, optional
         Extra per-particle series ``{name: callable(atoms) -> (N, ...) array}``
         or ``{name: 'arrayname'}`` (an ``atoms.arrays`` key), optionally as
@@ -403,7 +409,7 @@ class H5MDWriter:
 
     # --------------------------------------------------------------- sources
     def _observable_specs(self, atoms):
-        specs = {}
+        specs = {"dt": (None, UNITS["time"])}      # filled in by write()
         specs["kinetic_energy"] = _DEFAULT_OBSERVABLE_FUNCS["kinetic_energy"]
         if atoms.calc is not None and "energy" in getattr(atoms.calc, "implemented_properties",
                                                           ("energy",)):
@@ -641,6 +647,9 @@ class H5MDWriter:
         frame["particles"] = parts
         obs = {}
         for name, (func, _) in layout["observables"].items():
+            if func is None:                       # dt: set by write()
+                obs[name] = np.float64(np.nan)
+                continue
             if atoms.calc is None and name in ("potential_energy", "total_energy") \
                     and func is _DEFAULT_OBSERVABLE_FUNCS[name][0]:
                 self._warn_once(name, f"H5MDWriter: no calculator; writing NaN {name}")
@@ -734,7 +743,17 @@ class H5MDWriter:
             self._step_ds.resize(i + 1, axis=0)
             self._time_ds.resize(i + 1, axis=0)
         self._step_ds[i] = step
-        self._time_ds[i] = float(time) * units.TIME_TO_PS
+        time_ps = float(time) * units.TIME_TO_PS
+        self._time_ds[i] = time_ps
+        if "dt" in self._layout["observables"] and self._layout["observables"]["dt"][0] is None:
+            dt = f["observables/dt/value"]
+            if i > 0:
+                dt[i] = time_ps - float(self._time_ds[i - 1])
+                if i == 1:
+                    dt[0] = dt[1]
+            else:                                  # provisional until the second frame
+                dt[0] = (self.dyn.dt if self.dyn is not None and hasattr(self.dyn, "dt")
+                         else self.timestep) * units.TIME_TO_PS
         self._nframes = i + 1
         self._last_step = step
         f.flush()

@@ -20,6 +20,7 @@ from ase.md.md import MolecularDynamics
 
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
+from ..parallel import use_threads
 from . import _integrate as I
 from .boundaries import Piston
 
@@ -185,6 +186,7 @@ class DampedVerlet(MolecularDynamics):
             self.forces = self._compute_forces() if forces is None else forces
         invm = self._invm_n
         t0 = time.perf_counter()
+        use_threads(len(atoms))
         p = atoms.arrays["momenta"]
         h = 0.5 * self.dt
         I.kick(p, self.forces, h)

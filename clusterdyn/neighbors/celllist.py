@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import InputError
+from ..parallel import use_threads
 
 #: most cells per particle before the grid is coarsened (dilute, exploding samples)
 MAX_CELLS_PER_PARTICLE = 4
@@ -219,6 +220,7 @@ class NeighborList:
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         cell = np.asarray(cell, dtype=float).reshape(3, 3)
         pbc = np.asarray(pbc, dtype=bool).reshape(3)
+        use_threads(pos.shape[0])
         if (self.ref_nc is None or self.ref_nc.shape != pos.shape
                 or not np.array_equal(cell, self._cell) or not np.array_equal(pbc, self._pbc)
                 or (pos.shape[0] and _max_disp2(pos, self.ref_nc) > (0.5 * self.skin) ** 2)):

@@ -1,0 +1,177 @@
+"""Set-up geometry of an MCA packing: pairs, contact areas S_ij, distances q_ij, volumes.
+
+The contact areas and volumes come from the Voronoi tessellation of the
+automaton centres (``scipy.spatial.Voronoi``; for equal sizes it is the
+radical tessellation), computed once at set-up (physics.md 2.1, 2.5):
+
+* a *pair* is two automata whose Voronoi cells share a face; ``S_ij`` is the
+  face area (3D) or edge length times unit thickness (2D); ``q_ij`` is the
+  distance from centre i to the face plane (half the distance for Voronoi);
+* ``Omega_i = (1/D) sum_j q_ij S_ij`` (D = 3 or 2) over the faces the
+  automaton has with other automata: the volume of the pyramids on its faces
+  (for an interior automaton, exactly its Voronoi cell volume);
+* ``V_i``, the volume of the cell clipped at the sample surface, gives the mass.
+
+Free surfaces: the sample is closed by *mirror images* of the automata
+across the faces of the (orthorhombic) cell for open directions, and by
+periodic images for periodic directions.  A mirror plane cuts the surface
+cells where the next layer would be; faces with mirror images are dropped
+(free surface), so surface automata keep the faces they have, with their
+bulk areas.  This is exact for box samples built by :func:`mca_packing`
+(lattices placed half a layer from the cell faces, random packings packed
+against them); for other shapes carved from a box the surface cells are
+closed at the box faces.
+"""
+
+import math
+
+import numpy as np
+from scipy.spatial import Voronoi
+
+from ..errors import InputError
+
+
+def _polygon_area_3d(pts, normal):
+    """Area of a convex planar polygon given by unordered vertices (K, 3)."""
+    c = pts.mean(axis=0)
+    u = pts[0] - c
+    if np.linalg.norm(u) == 0:
+        u = pts[1] - c
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    x = (pts - c) @ u
+    y = (pts - c) @ v
+    order = np.argsort(np.arctan2(y, x))
+    x, y = x[order], y[order]
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def sample_planes(positions, radius, cell, pbc, dim):
+    """Lower and upper faces of the sample per axis (the cell, or the bounding box + radius)."""
+    cell = np.asarray(cell, float).reshape(3, 3)
+    lo = np.zeros(3)
+    hi = np.zeros(3)
+    for a in range(dim):
+        L = cell[a, a]
+        if L > 0:
+            lo[a], hi[a] = 0.0, L
+        else:
+            lo[a] = (positions[:, a] - radius).min()
+            hi[a] = (positions[:, a] + radius).max()
+    return lo, hi
+
+
+def tessellate(positions, radius, cell, pbc, dim=3):
+    """Voronoi pairs and geometry of a packing.
+
+    Parameters
+    ----------
+    positions : (N, 3) float64, Angstrom
+    radius : (N,) float64, Angstrom (sets the ghost-shell width)
+    cell : (3, 3) orthorhombic; pbc : 3 bools
+    dim : 3, or 2 for plane strain (z ignored, S per unit thickness)
+
+    Returns
+    -------
+    dict with ``i_p, j_p`` (P,) int64 rows (i < j), ``S_p`` (P,), ``q_p2`` (P, 2)
+    distances from i and j to the face, ``omega_n`` (N,) pyramid volume,
+    ``vcell_n`` (N,) clipped cell volume.
+    """
+    pos = np.asarray(positions, float)[:, :dim]
+    n = len(pos)
+    if n < dim + 2:
+        raise InputError("atoms", f"{n} automata", f"at least {dim + 2} automata for a tessellation")
+    pbc = np.asarray(pbc, bool).reshape(3)
+    cell = np.asarray(cell, float).reshape(3, 3)
+    lo, hi = sample_planes(np.asarray(positions, float), np.asarray(radius, float), cell, pbc, dim)
+    width = 3.0 * float(np.max(radius)) * 2.0
+    # ghost shell: kind 0 real, 1 periodic image (owner = original row), 2 mirror
+    pts = pos.copy()
+    owner = np.arange(n)
+    kind = np.zeros(n, np.int8)
+    for a in range(dim):
+        if pbc[a]:
+            L = cell[a, a]
+            sel_lo = pts[:, a] < lo[a] + width
+            sel_hi = pts[:, a] > hi[a] - width
+            add_p = pts[sel_lo].copy()
+            add_p[:, a] += L
+            add_m = pts[sel_hi].copy()
+            add_m[:, a] -= L
+            k_p = np.where(kind[sel_lo] == 0, 1, kind[sel_lo])
+            k_m = np.where(kind[sel_hi] == 0, 1, kind[sel_hi])
+            pts = np.vstack([pts, add_p, add_m])
+            owner = np.concatenate([owner, owner[sel_lo], owner[sel_hi]])
+            kind = np.concatenate([kind, k_p, k_m])
+        else:
+            sel_lo = pts[:, a] < lo[a] + width
+            sel_hi = pts[:, a] > hi[a] - width
+            add_l = pts[sel_lo].copy()
+            add_l[:, a] = 2 * lo[a] - add_l[:, a]
+            add_h = pts[sel_hi].copy()
+            add_h[:, a] = 2 * hi[a] - add_h[:, a]
+            pts = np.vstack([pts, add_l, add_h])
+            owner = np.concatenate([owner, owner[sel_lo], owner[sel_hi]])
+            kind = np.concatenate([kind, np.full(sel_lo.sum() + sel_hi.sum(), 2, np.int8)])
+    vor = Voronoi(pts)
+    vert = vor.vertices
+    pairs = {}
+    vcell = np.zeros(n)
+    omega = np.zeros(n)
+    for (a, b), rv in zip(vor.ridge_points, vor.ridge_vertices):
+        ka, kb = kind[a], kind[b]
+        if ka != 0 and kb != 0:
+            continue
+        if ka != 0:          # make a the real one
+            a, b, ka, kb = b, a, kb, ka
+        d = pts[b] - pts[a]
+        r = float(np.linalg.norm(d))
+        nvec = d / r
+        if -1 in rv:
+            raise InputError("atoms", f"automaton {a}",
+                             "a packing whose Voronoi cells are closed by the ghost shell",
+                             hint="is the sample inside its cell?")
+        vv = vert[rv]
+        if dim == 3:
+            area = _polygon_area_3d(vv, nvec)
+        else:
+            area = float(np.linalg.norm(vv[1] - vv[0]))
+        q = 0.5 * r
+        vcell[a] += q * area / dim
+        if kb == 2:
+            continue            # free surface: a face with a mirror image
+        j = owner[b]
+        if kb == 0:
+            vcell[b] += q * area / dim
+        if j == a:
+            raise InputError("cell", cell.diagonal().tolist(),
+                             "periodic lengths of at least 3 automaton sizes")
+        key = (min(a, j), max(a, j))
+        if key in pairs:
+            continue
+        pairs[key] = (area, q, q)
+    keys = np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
+    S = np.array([pairs[tuple(k)][0] for k in keys])
+    q2 = np.array([pairs[tuple(k)][1:] for k in keys]).reshape(-1, 2)
+    for (i, j), s, (qi, qj) in zip(keys, S, q2):
+        omega[i] += qi * s / dim
+        omega[j] += qj * s / dim
+    return {"i_p": keys[:, 0].copy(), "j_p": keys[:, 1].copy(), "S_p": S, "q_p2": q2,
+            "omega_n": omega, "vcell_n": vcell}
+
+
+def consistency(geom, positions, cell, pbc, dim=3):
+    """Per automaton, ``(sum_j q S n n)/Omega``: the identity inside the body (diagnostic)."""
+    pos = np.asarray(positions, float)
+    i, j = geom["i_p"], geom["j_p"]
+    d = pos[j] - pos[i]
+    L = np.diag(np.asarray(cell, float).reshape(3, 3))
+    for a in range(3):
+        if pbc[a]:
+            d[:, a] -= L[a] * np.round(d[:, a] / L[a])
+    nrm = d / np.linalg.norm(d, axis=1)[:, None]
+    A = np.zeros((len(pos), 3, 3))
+    w = geom["S_p"][:, None, None] * np.einsum("pa,pb->pab", nrm, nrm)
+    np.add.at(A, i, w * geom["q_p2"][:, 0, None, None])
+    np.add.at(A, j, w * geom["q_p2"][:, 1, None, None])
+    return A / geom["omega_n"][:, None, None]

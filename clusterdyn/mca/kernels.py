@@ -1,0 +1,381 @@
+"""numba kernels of the MCA force evaluation (physics.md 2.2-2.5).
+
+Naming follows STYLE.md: ``_n`` per automaton, ``_p`` per pair, ``_p2`` per
+pair side (0: side of automaton i, 1: side of j), ``_c`` Cartesian.
+Pairs are stored once (i < j by id); the separation is
+``d = x_j - x_i`` (minimum image across periodic axes), ``n = d / r``.
+
+Per-side values are the specific normal force ``sigma`` (tension positive)
+and the specific tangential force ``tau`` (a vector in the contact plane, in
+the *pair* convention: the tangential force on automaton i per unit area).
+The force on i is ``S (sigma_bar n + tau_bar)`` with the means over the two
+sides (equal unless a per-automaton correction, e.g. radial return, made them
+differ), the force on j its opposite: linear and angular momentum are
+conserved pair by pair.
+
+All kernels are module-level ``@njit(cache=True)``; per-automaton sums go
+through the incidence lists ``first_n/side_p/side_s`` (CSR: automaton i
+owns sides ``k in range(first_n[i], first_n[i+1])`` = pair ``side_p[k]``,
+side ``side_s[k]``), so the parallel loops never write to shared entries.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True)
+def _min_image(d, box_c, periodic_c):
+    for a in range(3):
+        if periodic_c[a]:
+            d[a] -= box_c[a] * math.floor(d[a] / box_c[a] + 0.5)
+
+
+@njit(cache=True)
+def _rotate(v, phi, out):
+    """out = R(phi) v, Rodrigues (phi a rotation vector)."""
+    ang = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    if ang < 1e-300:
+        out[0] = v[0]
+        out[1] = v[1]
+        out[2] = v[2]
+        return
+    kx = phi[0] / ang
+    ky = phi[1] / ang
+    kz = phi[2] / ang
+    c = math.cos(ang)
+    s = math.sin(ang)
+    kv = kx * v[0] + ky * v[1] + kz * v[2]
+    cx = ky * v[2] - kz * v[1]
+    cy = kz * v[0] - kx * v[2]
+    cz = kx * v[1] - ky * v[0]
+    out[0] = v[0] * c + cx * s + kx * kv * (1.0 - c)
+    out[1] = v[1] * c + cy * s + ky * kv * (1.0 - c)
+    out[2] = v[2] * c + cz * s + kz * kv * (1.0 - c)
+
+
+@njit(cache=True, parallel=True)
+def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c,
+                  tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c):
+    """Separation, elongation and tangential increment of every pair since the last commit.
+
+    Outputs: ``d_pc`` separation, ``r_p`` distance, ``dr_p = r - r_last``,
+    ``arm_p2`` lever arms (``r_last`` split as q0), ``dtau_pc`` tangential
+    increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)`` (physics.md 2.4) from the
+    objective relative displacement of the two material points at the contact,
+    ``taurot_p2c`` the stored tangential forces rotated with the pair.
+    """
+    npair = i_p.shape[0]
+    for p in prange(npair):
+        i = i_p[p]
+        j = j_p[p]
+        d = np.empty(3)
+        for a in range(3):
+            d[a] = pos_nc[j, a] - pos_nc[i, a]
+        _min_image(d, box_c, periodic_c)
+        r = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        rl = math.sqrt(dlast_pc[p, 0] ** 2 + dlast_pc[p, 1] ** 2 + dlast_pc[p, 2] ** 2)
+        nl = np.empty(3)
+        n = np.empty(3)
+        for a in range(3):
+            nl[a] = dlast_pc[p, a] / rl
+            n[a] = d[a] / r
+            d_pc[p, a] = d[a]
+        r_p[p] = r
+        dr_p[p] = r - rl
+        qs = q0_p2[p, 0] + q0_p2[p, 1]
+        ai = rl * q0_p2[p, 0] / qs
+        aj = rl * q0_p2[p, 1] / qs
+        arm_p2[p, 0] = ai
+        arm_p2[p, 1] = aj
+        # material points of i and j that were at the contact point at the last commit
+        phi_i = np.empty(3)
+        phi_j = np.empty(3)
+        for a in range(3):
+            phi_i[a] = theta_nc[i, a] - thlast_nc[i, a]
+            phi_j[a] = theta_nc[j, a] - thlast_nc[j, a]
+        ri = np.empty(3)
+        rj = np.empty(3)
+        _rotate(nl, phi_i, ri)
+        _rotate(nl, phi_j, rj)
+        du = np.empty(3)
+        for a in range(3):
+            du[a] = d[a] - ai * ri[a] - aj * rj[a]
+        dun = du[0] * n[0] + du[1] * n[1] + du[2] * n[2]
+        gi = G_n[i]
+        gj = G_n[j]
+        coef = 2.0 * gi * gj / (ai * gj + aj * gi)
+        for a in range(3):
+            dtau_pc[p, a] = coef * (du[a] - dun * n[a])
+        # rotate stored tangential forces: minimal rotation n_last -> n, then twist about n
+        ax = np.empty(3)
+        ax[0] = nl[1] * n[2] - nl[2] * n[1]
+        ax[1] = nl[2] * n[0] - nl[0] * n[2]
+        ax[2] = nl[0] * n[1] - nl[1] * n[0]
+        sn = math.sqrt(ax[0] ** 2 + ax[1] ** 2 + ax[2] ** 2)
+        cs = nl[0] * n[0] + nl[1] * n[1] + nl[2] * n[2]
+        ang = math.atan2(sn, cs)
+        if sn > 0.0:
+            for a in range(3):
+                ax[a] *= ang / sn
+        tw = 0.5 * ((phi_i[0] + phi_j[0]) * n[0] + (phi_i[1] + phi_j[1]) * n[1]
+                    + (phi_i[2] + phi_j[2]) * n[2])
+        tmp = np.empty(3)
+        out = np.empty(3)
+        tw_v = np.empty(3)
+        for a in range(3):
+            tw_v[a] = tw * n[a]
+        for s in range(2):
+            for a in range(3):
+                tmp[a] = tau_p2c[p, s, a]
+            _rotate(tmp, ax, out)
+            _rotate(out, tw_v, tmp)
+            tn = tmp[0] * n[0] + tmp[1] * n[1] + tmp[2] * n[2]
+            for a in range(3):
+                taurot_p2c[p, s, a] = tmp[a] - tn * n[a]
+
+
+@njit(cache=True, parallel=True)
+def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
+    """Split the elongation between the two automata (physics.md 2.4).
+
+    ``d eps_i = [A_j dr + q0_j (dB_j - dB_i)] / (A_i q0_j + A_j q0_i)`` with
+    ``A = 2G`` and ``dB = (1 - 2G/3K) dP``; unlinked pairs get zero.
+    """
+    for p in prange(i_p.shape[0]):
+        if linked_p[p] == 0:
+            deps_p2[p, 0] = 0.0
+            deps_p2[p, 1] = 0.0
+            continue
+        i = i_p[p]
+        j = j_p[p]
+        qi = q0_p2[p, 0]
+        qj = q0_p2[p, 1]
+        den = A_n[i] * qj + A_n[j] * qi
+        deps_p2[p, 0] = (A_n[j] * dr_p[p] + qj * (dB_n[j] - dB_n[i])) / den
+        deps_p2[p, 1] = (A_n[i] * dr_p[p] + qi * (dB_n[i] - dB_n[j])) / den
+
+
+@njit(cache=True, parallel=True)
+def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP_n, dB_n):
+    """Mean-stress increment of every automaton: ``dP = K sum_j dq_ij S_ij / Omega`` (MCA 8-9)."""
+    for i in prange(first_n.shape[0] - 1):
+        dv = 0.0
+        for k in range(first_n[i], first_n[i + 1]):
+            p = side_p[k]
+            s = side_s[k]
+            dv += q0_p2[p, s] * deps_p2[p, s] * S_p[p]
+        dP_n[i] = K_n[i] * dv / omega_n[i]
+        dB_n[i] = lk_n[i] * dP_n[i]
+
+
+@njit(cache=True, parallel=True)
+def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc,
+                 sigt_p2, taut_p2c):
+    """Elastic predictor of linked pairs: ``d sigma = (1-D)(2G d eps + (1-2G/3K) dP)``, ``d tau = (1-D) dtau``."""
+    for p in prange(i_p.shape[0]):
+        if linked_p[p] == 0:
+            continue
+        i = i_p[p]
+        j = j_p[p]
+        f = 1.0 - D_p[p]
+        sigt_p2[p, 0] = sig_p2[p, 0] + f * (A_n[i] * deps_p2[p, 0] + dB_n[i])
+        sigt_p2[p, 1] = sig_p2[p, 1] + f * (A_n[j] * deps_p2[p, 1] + dB_n[j])
+        for s in range(2):
+            for a in range(3):
+                taut_p2c[p, s, a] = taurot_p2c[p, s, a] + f * dtau_pc[p, a]
+
+
+@njit(cache=True, parallel=True)
+def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c, dtau_pc,
+                  sigt_p2, taut_p2c):
+    """Unlinked pairs: repulsion only in contact (``h = r - r0 < 0``) and Coulomb friction.
+
+    ``sigma = M_p h / r0`` with ``M_p = r0 / (q0_i/M_i + q0_j/M_j)``,
+    ``M = K + 4G/3`` (the two half-automata in series, uniaxial strain);
+    tangential force incremental, capped at ``mu |sigma|``; zero when apart.
+    """
+    for p in prange(i_p.shape[0]):
+        if linked_p[p] != 0:
+            continue
+        i = i_p[p]
+        j = j_p[p]
+        h = r_p[p] - r0_p[p]
+        if h >= 0.0:
+            sigt_p2[p, 0] = 0.0
+            sigt_p2[p, 1] = 0.0
+            for s in range(2):
+                for a in range(3):
+                    taut_p2c[p, s, a] = 0.0
+            continue
+        Mp = r0_p[p] / (q0_p2[p, 0] / M_n[i] + q0_p2[p, 1] / M_n[j])
+        sg = Mp * h / r0_p[p]
+        sigt_p2[p, 0] = sg
+        sigt_p2[p, 1] = sg
+        lim = mu_p[p] * abs(sg)
+        for s in range(2):
+            t2 = 0.0
+            for a in range(3):
+                v = taurot_p2c[p, s, a] + dtau_pc[p, a]
+                taut_p2c[p, s, a] = v
+                t2 += v * v
+            t = math.sqrt(t2)
+            if t > lim:
+                sc = lim / t
+                for a in range(3):
+                    taut_p2c[p, s, a] *= sc
+
+
+@njit(cache=True, parallel=True)
+def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
+                   omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
+    """Forces, torques, Love-Weber stress and elastic energy of every automaton.
+
+    ``F_i = sum_j S (sigma_bar n_ij + tau_bar)``,
+    ``T_i = sum_j q_ij S n_ij x tau_bar`` (MCA 6);
+    ``sigma^i = (1/Omega_i) sum_j q_ij S (sigma_ij n + tau_ij) (x) n`` (symmetrised);
+    ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
+    """
+    for i in prange(first_n.shape[0] - 1):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        st = np.zeros((3, 3))
+        for k in range(first_n[i], first_n[i + 1]):
+            p = side_p[k]
+            s = side_s[k]
+            r = r_p[p]
+            nx = d_pc[p, 0] / r
+            ny = d_pc[p, 1] / r
+            nz = d_pc[p, 2] / r
+            S = S_p[p]
+            sb = 0.5 * (sig_p2[p, 0] + sig_p2[p, 1])
+            tbx = 0.5 * (tau_p2c[p, 0, 0] + tau_p2c[p, 1, 0])
+            tby = 0.5 * (tau_p2c[p, 0, 1] + tau_p2c[p, 1, 1])
+            tbz = 0.5 * (tau_p2c[p, 0, 2] + tau_p2c[p, 1, 2])
+            sgn = 1.0 if s == 0 else -1.0
+            fx += sgn * S * (sb * nx + tbx)
+            fy += sgn * S * (sb * ny + tby)
+            fz += sgn * S * (sb * nz + tbz)
+            a = arm_p2[p, s] * S
+            tx += a * (ny * tbz - nz * tby)
+            ty += a * (nz * tbx - nx * tbz)
+            tz += a * (nx * tby - ny * tbx)
+            w = q0_p2[p, s] * S
+            sg = sig_p2[p, s]
+            tv0 = sg * nx + tau_p2c[p, s, 0]
+            tv1 = sg * ny + tau_p2c[p, s, 1]
+            tv2 = sg * nz + tau_p2c[p, s, 2]
+            st[0, 0] += w * tv0 * nx
+            st[0, 1] += w * tv0 * ny
+            st[0, 2] += w * tv0 * nz
+            st[1, 0] += w * tv1 * nx
+            st[1, 1] += w * tv1 * ny
+            st[1, 2] += w * tv1 * nz
+            st[2, 0] += w * tv2 * nx
+            st[2, 1] += w * tv2 * ny
+            st[2, 2] += w * tv2 * nz
+        f_nc[i, 0] = fx
+        f_nc[i, 1] = fy
+        f_nc[i, 2] = fz
+        t_nc[i, 0] = tx
+        t_nc[i, 1] = ty
+        t_nc[i, 2] = tz
+        inv = 1.0 / omega_n[i]
+        for a in range(3):
+            for b in range(a, 3):
+                v = 0.5 * (st[a, b] + st[b, a]) * inv
+                s_ncc[i, a, b] = v
+                s_ncc[i, b, a] = v
+        P = (s_ncc[i, 0, 0] + s_ncc[i, 1, 1] + s_ncc[i, 2, 2]) / 3.0
+        ss = 0.0
+        for a in range(3):
+            for b in range(3):
+                dv = s_ncc[i, a, b] - (P if a == b else 0.0)
+                ss += dv * dv
+        e_n[i] = omega_n[i] * (ss / (4.0 * G_n[i]) + P * P / (2.0 * K_n[i]))
+
+
+@njit(cache=True, parallel=True)
+def pair_damping(vel_nc, om_nc, i_p, j_p, d_pc, r_p, arm_p2, c_p, f_nc_out, t_nc_out,
+                 first_n, side_p, side_s):
+    """Viscous damping of the relative velocity at the contact point of every pair.
+
+    ``f = c_p v_rel`` on i (``-f`` on j), ``v_rel = (V_j - a_j omega_j x n) - (V_i + a_i omega_i x n)``;
+    torques ``a n x f`` on both: momentum and angular momentum conserved.
+    Writes per automaton (``f_nc_out``, ``t_nc_out`` overwritten).
+    """
+    for i in prange(first_n.shape[0] - 1):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for k in range(first_n[i], first_n[i + 1]):
+            p = side_p[k]
+            s = side_s[k]
+            a_ = i_p[p]
+            b_ = j_p[p]
+            r = r_p[p]
+            n0 = d_pc[p, 0] / r
+            n1 = d_pc[p, 1] / r
+            n2 = d_pc[p, 2] / r
+            ai = arm_p2[p, 0]
+            aj = arm_p2[p, 1]
+            # omega x n
+            wi0 = om_nc[a_, 1] * n2 - om_nc[a_, 2] * n1
+            wi1 = om_nc[a_, 2] * n0 - om_nc[a_, 0] * n2
+            wi2 = om_nc[a_, 0] * n1 - om_nc[a_, 1] * n0
+            wj0 = om_nc[b_, 1] * n2 - om_nc[b_, 2] * n1
+            wj1 = om_nc[b_, 2] * n0 - om_nc[b_, 0] * n2
+            wj2 = om_nc[b_, 0] * n1 - om_nc[b_, 1] * n0
+            v0 = (vel_nc[b_, 0] - aj * wj0) - (vel_nc[a_, 0] + ai * wi0)
+            v1 = (vel_nc[b_, 1] - aj * wj1) - (vel_nc[a_, 1] + ai * wi1)
+            v2 = (vel_nc[b_, 2] - aj * wj2) - (vel_nc[a_, 2] + ai * wi2)
+            c = c_p[p]
+            f0 = c * v0
+            f1 = c * v1
+            f2 = c * v2
+            sgn = 1.0 if s == 0 else -1.0
+            fx += sgn * f0
+            fy += sgn * f1
+            fz += sgn * f2
+            arm = arm_p2[p, s]
+            tx += arm * (n1 * f2 - n2 * f1)
+            ty += arm * (n2 * f0 - n0 * f2)
+            tz += arm * (n0 * f1 - n1 * f0)
+        f_nc_out[i, 0] = fx
+        f_nc_out[i, 1] = fy
+        f_nc_out[i, 2] = fz
+        t_nc_out[i, 0] = tx
+        t_nc_out[i, 1] = ty
+        t_nc_out[i, 2] = tz
+
+
+@njit(cache=True)
+def incidence(n, i_p, j_p):
+    """CSR of pair sides per automaton: (first_n, side_p, side_s)."""
+    cnt = np.zeros(n + 1, np.int64)
+    for p in range(i_p.shape[0]):
+        cnt[i_p[p] + 1] += 1
+        cnt[j_p[p] + 1] += 1
+    for i in range(n):
+        cnt[i + 1] += cnt[i]
+    fill = cnt[:-1].copy()
+    side_p = np.empty(cnt[n], np.int64)
+    side_s = np.empty(cnt[n], np.int8)
+    for p in range(i_p.shape[0]):
+        a = i_p[p]
+        side_p[fill[a]] = p
+        side_s[fill[a]] = 0
+        fill[a] += 1
+        b = j_p[p]
+        side_p[fill[b]] = p
+        side_s[fill[b]] = 1
+        fill[b] += 1
+    return cnt, side_p, side_s

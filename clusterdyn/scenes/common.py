@@ -1,0 +1,70 @@
+"""Pieces shared by scenes: initial noise, a frame loop with progress, plotting set-up."""
+
+import time
+
+import numpy as np
+
+from ..md.boundaries import Piston
+
+
+def thermal_noise(atoms, rms, seed, exclude=None):
+    """Add seeded Gaussian velocities of ``rms`` speed (3-D rms) with zero total momentum."""
+    if not rms:
+        return
+    rng = np.random.default_rng(seed)
+    v = rng.normal(0.0, rms / np.sqrt(3.0), (len(atoms), 3))
+    m = atoms.get_masses()
+    keep = np.ones(len(atoms), bool) if exclude is None else ~np.asarray(exclude, bool)
+    v[~keep] = 0.0
+    v[keep] -= (m[keep, None] * v[keep]).sum(axis=0) / m[keep].sum()
+    atoms.set_velocities(atoms.get_velocities() + v)
+
+
+def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run"):
+    """Run ``nsteps`` steps, calling ``on_frame(dyn)`` at step 0 and every ``nsteps/nframes`` steps.
+
+    Shows one tqdm bar over all steps (with time left) when ``progress``.
+    Returns the wall time of the stepping (without frame callbacks).
+    """
+    every = max(1, int(round(nsteps / max(1, nframes))))
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=nsteps, desc=desc, unit="step", leave=False, dynamic_ncols=True)
+    on_frame(dyn)
+    done = 0
+    t_run = 0.0
+    try:
+        while done < nsteps:
+            k = min(every, nsteps - done)
+            t0 = time.perf_counter()
+            dyn.run(k)
+            t_run += time.perf_counter() - t0
+            done += k
+            if bar is not None:
+                bar.update(k)
+            on_frame(dyn)
+    finally:
+        if bar is not None:
+            bar.close()
+    return t_run
+
+
+def piston_layer(atoms, thickness, axis=0):
+    """Mask of the particles within ``thickness`` of the lowest coordinate along ``axis``."""
+    x = atoms.positions[:, axis]
+    return x < x.min() + thickness
+
+
+def make_piston(atoms, thickness, u, axis=0):
+    mask = piston_layer(atoms, thickness, axis)
+    v = np.zeros(3)
+    v[axis] = u
+    return mask, Piston(mask, v)
+
+
+def matplotlib_agg():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt

@@ -1,0 +1,228 @@
+"""Scene ``shock``: a CD piston shock in a block of clusters (the README's main job).
+
+A block of clusters, a crystal direction along x, periodic across, is driven
+by a piston (a layer of clusters moving at u).  The front is tracked in
+slabs; D comes from a straight-line fit of the front position against time,
+and the state behind the front (u, rho, longitudinal stress P) from the slabs
+between piston and front.  They are compared with the material's
+experimental Hugoniot (Al: Al-1100, D = 5.392 + 1.341 u km/s).
+"""
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import units
+from ..analysis.shock import ShockTracker
+from ..build import fcc_packing, repeat_lengths
+from ..calculators import ClusterDynamics
+from ..errors import InputError
+from ..materials import get_material, hugoniot
+from ..md import DampedVerlet, default_timestep
+from ..md.damped import TIMESTEP_FACTOR
+from .base import Param, Quantity, SceneResult, register
+from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
+
+CD_MATERIALS = ("Al", "Pb", "B4C", "h-BN")
+
+PARAMS = [
+    Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
+    Param("u", 3.0, "piston speed", unit="km/s", low=0.0, high=20.0, low_open=True),
+    Param("direction", "100", "crystal direction along the shock (x)", kind="choice",
+          choices=("100", "110", "111")),
+    Param("size", (100, 8, 8), "repeat cells along x, y, z (x = shock direction)", kind="ints"),
+    Param("r0", 5.0, "cluster size", unit="um", low=0.0, low_open=True),
+    Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
+    Param("J", None, "damping Gamma = c0/(J r0); none = off (shock Hugoniots run undamped)",
+          low=0.0, low_open=True, optional=True),
+    Param("noise", 10.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
+    Param("seed", 1, "random seed of the initial noise", kind="int", low=0),
+    Param("dt_factor", TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + u)", low=0.0,
+          high=0.5, low_open=True),
+    Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
+    Param("h5md", True, "write an H5MD trajectory (with --out)", kind="bool"),
+    Param("h5md_frames", 20, "trajectory frames written to the H5MD file", kind="int", low=1),
+]
+
+
+@dataclass
+class ShockSetup:
+    atoms: object
+    calc: object
+    dyn: object
+    piston: object
+    piston_mask: object
+    nsteps: int
+    slab: float
+    length: float
+    material: object
+    u: float
+
+
+def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 8), r0=5 * units.um,
+                rc=1.15, J=None, noise=10 * units.m_s, seed=1, dt_factor=TIMESTEP_FACTOR,
+                run_fraction=0.8):
+    """Sample, calculator, piston and dynamics of a piston shock (ASE units)."""
+    mat = get_material(material)
+    if mat.curve is None:
+        raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
+    if not u > 0:
+        raise InputError("u", u, "a positive piston speed")
+    atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
+    calc = ClusterDynamics(rc=rc)
+    atoms.calc = calc
+    calc.setup(atoms)
+    pot = calc.potentials[0]
+    # piston: the first 1.5 r0 (at least two atomic planes in every orientation)
+    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u)
+    thermal_noise(atoms, noise, seed, exclude=mask)
+    atoms.set_constraint(piston)
+    atoms.set_momenta(atoms.get_momenta())            # applies the piston velocity
+    dt = dt_factor * r0 / (pot.c0 + u)
+    dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    length = atoms.positions[:, 0].max() - atoms.positions[:, 0].min()
+    try:
+        d_guess = hugoniot(mat.name).D(u)
+    except InputError:
+        d_guess = pot.c0 * math.sqrt(1.5) + 1.3 * u
+    t_end = run_fraction * length / d_guess
+    nsteps = int(math.ceil(t_end / dt))
+    # slab width: one repeat length along x for [100] (two planes), at least r0
+    slab = max(float(repeat_lengths(direction, r0)[0]), r0)
+    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u)
+
+
+def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock"):
+    """Run a built shock, tracking the front; returns (ShockTracker, ShockState, stepping wall time)."""
+    atoms, calc = setup.atoms, setup.calc
+    x0 = atoms.positions[:, 0].min()
+    tracker = ShockTracker(setup.material.rho0, setup.u, setup.slab, axis=0, lo=x0,
+                           hi=x0 + setup.length + setup.slab)
+
+    def frame(dyn):
+        out = calc.compute(atoms, per_particle=True)
+        pist = atoms.positions[setup.piston_mask, 0].max()
+        tracker.add(dyn.get_time(), atoms, out["virials"], pist, exclude=setup.piston_mask)
+        if on_frame is not None:
+            on_frame(dyn)
+
+    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc)
+    return tracker, tracker.result(), t_run
+
+
+def plot_shock(tracker, state, path, title=""):
+    plt = matplotlib_agg()
+    fig, axs = plt.subplots(1, 3, figsize=(14, 4.2))
+    t = np.array([f["t"] for f in tracker.frames]) / units.ns
+    xf = np.array([f["front"] for f in tracker.frames]) / units.um
+    xp = np.array([f["piston"] for f in tracker.frames]) / units.um
+    axs[0].plot(t, xf, "o", ms=3, label="front")
+    axs[0].plot(t, xp, "-", label="piston")
+    if np.isfinite(state.D_fit):
+        tt = np.linspace(t.min(), t.max(), 10)
+        # refit line for display
+        ok = np.isfinite(xf)
+        A = np.polyfit(t[ok], xf[ok], 1)
+        axs[0].plot(tt, np.polyval(A, tt), "k--", lw=0.8,
+                    label=f"D = {state.D_fit / units.km_s:.3f} km/s")
+    axs[0].set_xlabel("t (ns)")
+    axs[0].set_ylabel("x (um)")
+    axs[0].legend()
+    axs[0].set_title("x-t diagram")
+    for f in tracker.frames[:: max(1, len(tracker.frames) // 6)]:
+        p = f["profile"]
+        axs[1].plot(p["x"] / units.um, p["velocity"][:, 0] / units.km_s, lw=1)
+        axs[2].plot(p["x"] / units.um, -p["stress"][:, 0] / units.GPa, lw=1)
+    axs[1].set_xlabel("x (um)")
+    axs[1].set_ylabel("particle velocity u_x (km/s)")
+    axs[2].set_xlabel("x (um)")
+    axs[2].set_ylabel("longitudinal stress -sigma_xx (GPa)")
+    axs[1].set_title("velocity profiles")
+    axs[2].set_title("stress profiles")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def shock_quantities(state, mat, u):
+    """Quantities of a shock state against the experimental Hugoniot (if the material has one)."""
+    ref = None
+    try:
+        ref = hugoniot(mat.name)
+    except InputError:
+        pass
+    refD = ref.D(u) / units.km_s if ref else None
+    rho0_ref = ref.rho0_g_cm3 if ref else None
+    q = {
+        "D": Quantity(state.D_fit / units.km_s, "km/s", refD, spread=state.D_fit_err / units.km_s,
+                      note="front position fit"),
+        "u": Quantity(state.u / units.km_s, "km/s", u / units.km_s, spread=state.u_spread / units.km_s,
+                      note="mean particle velocity behind the front vs piston"),
+        "P": Quantity(state.P / units.GPa, "GPa",
+                      (rho0_ref * units.g_cm3 * ref.D(u) * u / units.GPa) if ref else None,
+                      spread=state.P_spread / units.GPa, note="-sigma_xx behind the front"),
+        "rho": Quantity(state.rho / units.g_cm3, "g/cm3",
+                        (ref.density(u) / units.g_cm3) if ref else None,
+                        spread=state.rho_spread / units.g_cm3),
+        "D_mass": Quantity(state.D_mass / units.km_s, "km/s", state.D_fit / units.km_s,
+                           note="rho u/(rho - rho0) vs the fitted D"),
+        "P_momentum": Quantity(state.P_momentum / units.GPa, "GPa", state.P / units.GPa,
+                               note="rho0 D u vs the measured -sigma_xx"),
+    }
+    return q, ref
+
+
+@register("shock", "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot",
+          PARAMS)
+def shock_scene(v, out=None, progress=True):
+    t0 = time.perf_counter()
+    setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
+                        v["noise"], v["seed"], v["dt_factor"])
+    writer = None
+    files = []
+    if out is not None and v["h5md"]:
+        try:
+            from ..io import H5MDWriter
+        except ImportError:
+            H5MDWriter = None
+        if H5MDWriter is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            path = out / "shock.h5md"
+            writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v)
+            setup.dyn.attach(writer, interval=max(1, setup.nsteps // v["h5md_frames"]))
+            files.append(path)
+    try:
+        tracker, state, t_run = run_shock(setup, v["frames"], progress)
+    finally:
+        if writer is not None:
+            writer.close()
+    q, ref = shock_quantities(state, setup.material, setup.u)
+    n = len(setup.atoms)
+    notes = list(state.notes)
+    notes.append(f"{n} clusters, {setup.nsteps} steps of {setup.dyn.dt / (setup.calc.potentials[0].r0 / setup.calc.potentials[0].c0):.4f} r0/c0, "
+                 f"{n * setup.nsteps / max(t_run, 1e-9):.3g} particle-steps/s, "
+                 f"{setup.calc.nl.nbuilds} neighbour-list builds")
+    if ref is not None:
+        notes.append(f"reference: {ref.name} Hugoniot, {ref.source}")
+    res = SceneResult("shock", q, time.perf_counter() - t0, files=files, notes=notes,
+                      extra={"steady": state.steady, "fit_rms_um": state.fit_rms / units.um,
+                             "n_particles": n, "n_steps": setup.nsteps,
+                             "particle_steps_per_s": n * setup.nsteps / max(t_run, 1e-9)})
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        png = out / "shock.png"
+        plot_shock(tracker, state, png, f"{setup.material.name} [{v['direction']}] u = "
+                   f"{setup.u / units.km_s:g} km/s")
+        files.append(png)
+        import csv
+        with open(out / "shock_front.csv", "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["t_ns", "front_um", "piston_um"])
+            for f in tracker.frames:
+                w.writerow([f["t"] / units.ns, f["front"] / units.um, f["piston"] / units.um])
+        files.append(out / "shock_front.csv")
+    res.wall_time_s = time.perf_counter() - t0
+    return res
