@@ -431,6 +431,13 @@ class H5MDWriter:
                 raise InputError("atoms.arrays", name,
                                  f"array names other than {RESERVED}",
                                  hint="rename it or drop it with per_particle={name!r: None}")
+            if atoms.arrays[name].dtype.kind not in "fiubc":
+                if name not in self._user_per_particle:
+                    self._warn_once(("array", name),
+                                    f"H5MDWriter: atoms.arrays[{name!r}] has dtype "
+                                    f"{atoms.arrays[name].dtype}; not written (H5MD series "
+                                    "are numeric)")
+                continue
             specs[name] = (name, None)
         for name, spec in self._user_per_particle.items():
             if spec is None:
@@ -859,12 +866,16 @@ class H5MDReader:
                               and "value" in g[k]]
             first = next((k for k in ("position", "velocity", "force") if k in g), None)
             if first is None:
-                raise InputError("path", self.path, what,
-                                 hint=f"particles/{self.group_name} has no position, velocity "
-                                      "or force")
-            self._first = g[first]
-            self.n_frames = int(self._first["value"].shape[0])
-            self.n_particles = int(self._first["value"].shape[1])
+                if "h5md" not in self._file:
+                    raise InputError("path", self.path, what,
+                                     hint=f"particles/{self.group_name} has no position, "
+                                          "velocity or force")
+                self._first = None               # H5MD file created, no frame written yet
+                self.n_frames = self.n_particles = 0
+            else:
+                self._first = g[first]
+                self.n_frames = int(self._first["value"].shape[0])
+                self.n_particles = int(self._first["value"].shape[1])
         except InputError:
             self._file.close()
             raise
@@ -876,6 +887,8 @@ class H5MDReader:
     @property
     def steps(self):
         g = self._first
+        if g is None:
+            return np.zeros(0, dtype=np.int64)
         if "step" in g:
             return np.asarray(g["step"][: self.n_frames], dtype=np.int64)
         return np.arange(self.n_frames, dtype=np.int64)
@@ -883,6 +896,8 @@ class H5MDReader:
     @property
     def times(self):
         g = self._first
+        if g is None:
+            return np.zeros(0)
         if "time" not in g:
             return self.steps.astype(np.float64) * units.PS
         return np.asarray(g["time"][: self.n_frames], dtype=np.float64) \
@@ -939,7 +954,8 @@ class H5MDReader:
             u = self._g[k]["value"].attrs.get("unit")
             if u is not None:
                 out[k] = u.decode() if isinstance(u, bytes) else str(u)
-        if "time" in self._first and "unit" in self._first["time"].attrs:
+        if self._first is not None and "time" in self._first \
+                and "unit" in self._first["time"].attrs:
             out["time"] = str(self._first["time"].attrs["unit"])
         for k in self.observables:
             g = self._file["observables"][k]
@@ -952,8 +968,10 @@ class H5MDReader:
         n = self.n_frames
         if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) \
                 or not -n <= frame < n:
-            raise InputError("frame", frame, f"an integer in [{-n}, {n}) for {self.path}"
-                             if n else f"nothing: {self.path} has no frames")
+            if not n:
+                raise InputError("frame", frame, "an existing frame",
+                                 hint=f"{self.path} has no frames yet")
+            raise InputError("frame", frame, f"an integer in [{-n}, {n}) for {self.path}")
         return int(frame) % n
 
     def get_observable(self, name):

@@ -279,6 +279,14 @@ def test_append_mode_rules(tmp_path):
     with pytest.raises(InputError, match="10 particles"):
         H5MDWriter(path, atoms2, mode="a")
     assert read_h5md(path).info["step"] == 2     # file untouched by the refused writers
+    # 'a' on a missing file, or on one created without frames, starts a new trajectory
+    for fresh in (tmp_path / "new.h5md", tmp_path / "empty.h5md"):
+        if fresh.name == "empty.h5md":
+            H5MDWriter(fresh, atoms).close()
+        with H5MDWriter(fresh, atoms, mode="a") as w:
+            w.write()
+            w.write()
+        np.testing.assert_array_equal(H5MDReader(fresh).steps, [0, 1])
 
 
 def test_invalid_arguments(tmp_path):
