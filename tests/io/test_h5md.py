@@ -286,7 +286,8 @@ def test_append_mode_rules(tmp_path):
         with H5MDWriter(fresh, atoms, mode="a") as w:
             w.write()
             w.write()
-        np.testing.assert_array_equal(H5MDReader(fresh).steps, [0, 1])
+        with H5MDReader(fresh) as r:
+            np.testing.assert_array_equal(r.steps, [0, 1])
 
 
 def test_invalid_arguments(tmp_path):
