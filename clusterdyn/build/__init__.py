@@ -6,3 +6,6 @@ from .shapes import Box, Cylinder, Plate, Sphere
 
 __all__ = ["fcc_packing", "fcc_sites", "make_cluster_atoms", "orientation_matrix", "parse_direction",
            "repeat_lengths", "ORIENTATIONS", "Box", "Cylinder", "Plate", "Sphere"]
+from .polycrystal import grain_statistics, polycrystal, polycrystal_summary  # noqa: E402
+from .orientation import grain_orientation, misorientation_angle, misorientation_distribution  # noqa: E402
+__all__ += ["polycrystal", "polycrystal_summary", "grain_statistics", "grain_orientation", "misorientation_angle", "misorientation_distribution"]  # noqa: E501

@@ -3,9 +3,9 @@
 * :func:`grain_orientation` recovers the lattice rotation of one grain from
   its interior clusters (nearest-neighbour vectors fitted to the ideal
   ``r0 <110>/sqrt(2)`` set, Kabsch), then confirms the lattice is fcc with
-  spglib: a conventional cubic cell (or a 2x2x2 block of them) is cut from the
-  grain's actual cluster positions in the fitted frame and its space group must
-  be Fm-3m (225).
+  spglib: the grain's interior clusters, folded into one conventional cubic
+  cell of the fitted lattice and averaged per sublattice, must form space
+  group Fm-3m (225) with a small scatter about the fitted sites.
 * :func:`misorientation_angle` gives the disorientation angle of two
   rotations modulo the 24 proper rotations of the cube.
 * :func:`neighbouring_grains` and :func:`misorientation_distribution` give the
@@ -19,6 +19,7 @@ Rotation convention everywhere (as :func:`~clusterdyn.build.lattice.fcc_sites`):
 import functools
 import itertools
 import math
+import warnings
 
 import numpy as np
 import spglib
@@ -214,18 +215,22 @@ def _r0_of(atoms):
         raise InputError("atoms", "Atoms without info['cd_r0']", "clusters from clusterdyn.build") from None
 
 
-def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.1, details=False):
+def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.2, details=False):
     """Recover a grain's lattice rotation and confirm with spglib that it is fcc (Fm-3m, 225).
 
     Interior clusters are those with exactly 12 neighbours of the same grain in
     ``shell`` (in r0) and none of another grain; ``depth`` >= 2 also requires
     their neighbours to be such (two shells away from the boundary), falling
-    back to fewer shells in a grain too small for that.  Their
-    neighbour vectors give the rotation (:func:`fit_fcc_rotation`).  A cube of
-    2x2x2 (else 1x1x1) conventional cells, edge ``sqrt(2)`` times the measured
-    mean neighbour distance, is placed on an interior cluster in the fitted
-    frame; the clusters inside it (actual positions) must be 32 (4) and spglib
-    must find space group 225 for that cell with ``symprec`` (in r0).
+    back to fewer shells in a grain too small for that.  Their neighbour
+    vectors give the rotation (:func:`fit_fcc_rotation`) and the lattice
+    constant ``a = sqrt(2) <r_nn>``.  The interior clusters are then folded into
+    one conventional cubic cell of that lattice: each is assigned to the
+    nearest site of the four fcc sublattices, and the cell built from the four
+    mean positions (actual positions, averaged over the grain, so thermal noise
+    averages out) must be space group 225 for spglib at ``symprec`` (in r0),
+    with every sublattice occupied and the clusters' rms scatter about the
+    fitted lattice below ``symprec/2`` (an hcp grain, with every third layer
+    0.58 r0 off the fcc sites, fails here).
 
     Parameters
     ----------
@@ -234,8 +239,9 @@ def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.1, deta
     grain : int
         Grain id.
     details : bool
-        Also return a dict (spacegroup, number of interior clusters, rms
-        angular fit error in degrees, measured neighbour distance).
+        Also return a dict (spacegroup, number of interior clusters, shells
+        used, rms angular fit error in degrees, measured neighbour distance,
+        scatter about the fitted lattice in r0).
 
     Returns
     -------
@@ -284,35 +290,32 @@ def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.1, deta
     r_nn = float(np.linalg.norm(vecs, axis=1).mean())
     a = SQRT2 * r_nn
 
-    # spglib: cut a conventional block from the actual positions, in the fitted frame
+    # fold the interior clusters into one conventional cell of the fitted lattice
     centre = rel[interior].mean(axis=0)
-    order = np.argsort(np.linalg.norm(_min_image(rel[interior] - centre, box), axis=1))
-    same_grain = gid == grain
-    dataset, cell = None, None
-    for n in (2, 1):
-        for k in order[:20]:
-            p0 = rel[interior[k]]
-            idx = tree.query_ball_point(p0 + R @ np.full(3, 0.5 * n * a - 0.25 * a), (n * 0.87 + 0.3) * a)
-            idx = np.array(idx, dtype=np.int64)
-            d = _min_image(rel[idx] - p0, box)
-            f = (d @ R) / (n * a) + 0.25 / n       # fractional coordinates of the block
-            inside = np.all((f >= 0) & (f < 1), axis=1)
-            if inside.sum() != 4 * n ** 3 or not same_grain[idx[inside]].all():
-                continue
-            lattice = (n * a / r0) * R.T           # rows: block edges in the lab frame, in r0
-            cell = (lattice, f[inside], np.ones(int(inside.sum()), dtype=int))
-            dataset = spglib.get_symmetry_dataset(cell, symprec=symprec)
-            break
-        if dataset is not None:
-            break
-    if dataset is None or dataset.number != 225:
-        got = "no complete conventional cell" if dataset is None else f"{dataset.international} ({dataset.number})"
-        raise InputError("grain", grain, "an fcc grain: spglib space group Fm-3m (225)",
-                         hint=f"found {got}; rms fit {rms:.2f} deg")
+    k0 = interior[int(np.argmin(np.linalg.norm(_min_image(rel[interior] - centre, box), axis=1)))]
+    c = _min_image(rel[interior] - rel[k0], box) @ R / a          # crystal coordinates, cube edges
+    cand = np.round(c[:, None, :] - _FCC_BASIS[None]) + _FCC_BASIS[None]   # nearest site of each sublattice
+    dev = c[:, None, :] - cand
+    site = np.argmin((dev ** 2).sum(axis=2), axis=1)
+    res = dev[np.arange(len(c)), site]                             # residual from the nearest fcc site
+    scatter = float(np.sqrt((res ** 2).sum(axis=1).mean()) * a / r0)
+    counts = np.bincount(site, minlength=4)
+    mean_res = np.array([res[site == b].mean(axis=0) if counts[b] else np.zeros(3) for b in range(4)])
+    frac = np.mod(_FCC_BASIS + mean_res - mean_res.mean(axis=0), 1.0)
+    cell = ((a / r0) * R.T, frac, np.ones(4, dtype=int))           # rows: cube edges (lab), in r0
+    with warnings.catch_warnings():          # spglib 2.5 deprecates returning None on failure
+        warnings.simplefilter("ignore", DeprecationWarning)
+        dataset = spglib.get_symmetry_dataset(cell, symprec=symprec)
+    number = None if dataset is None else dataset.number
+    if number != 225 or counts.min() == 0 or scatter > 0.5 * symprec:
+        got = "no symmetry" if dataset is None else f"{dataset.international} ({dataset.number})"
+        raise InputError("grain", grain, "an fcc grain (spglib space group Fm-3m, 225)",
+                         hint=f"folded cell: {got}, clusters per sublattice {counts.tolist()}, scatter "
+                              f"{scatter:.3f} r0 about the fitted lattice (limit {0.5 * symprec:g}); "
+                              f"rms fit {rms:.2f} deg")
     if details:
         return R, {"spacegroup": f"{dataset.international} ({dataset.number})", "n_interior": len(interior),
-                   "depth": used_depth,
-                   "rms_deg": rms, "nn_distance": r_nn, "block_cells": int(round(len(cell[1]) / 4))}
+                   "depth": used_depth, "rms_deg": rms, "nn_distance": r_nn, "scatter_r0": scatter}
     return R
 
 

@@ -98,7 +98,7 @@ def test_recover_after_thermal_noise(known):
 
 
 def test_not_fcc_refused():
-    hcp = bulk("Mg", "hcp", a=1.0, c=math.sqrt(8 / 3)).repeat((6, 6, 4))
+    hcp = bulk("Mg", "hcp", a=1.0, c=math.sqrt(8 / 3), orthorhombic=True).repeat((6, 4, 4))
     pos = hcp.positions * R0
     atoms = make_cluster_atoms(pos, ["Al"], [R0], cell=hcp.cell * R0, pbc=True)
     atoms.new_array("grain", np.zeros(len(atoms), dtype=np.int64))
