@@ -164,7 +164,7 @@ def check_cell(cell, pbc):
     direction of zero length.
     """
     cell = np.asarray(cell, dtype=float).reshape(3, 3)
-    pbc = np.asarray(pbc, dtype=bool).reshape(3)
+    pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).copy()
     if pbc.any():
         off = cell - np.diag(np.diag(cell))
         if np.abs(off).max() > 1e-10 * max(1.0, np.abs(cell).max()):
@@ -219,7 +219,7 @@ class NeighborList:
         """Rebuild if needed; return True when rebuilt."""
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         cell = np.asarray(cell, dtype=float).reshape(3, 3)
-        pbc = np.asarray(pbc, dtype=bool).reshape(3)
+        pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).copy()
         use_threads(pos.shape[0])
         if (self.ref_nc is None or self.ref_nc.shape != pos.shape
                 or not np.array_equal(cell, self._cell) or not np.array_equal(pbc, self._pbc)
@@ -288,7 +288,7 @@ class NeighborList:
         self.offset_nc = wpos - pos
         self.ref_nc = pos.copy()
         self._cell = np.array(cell, dtype=float).reshape(3, 3)
-        self._pbc = np.array(pbc, dtype=bool).reshape(3)
+        self._pbc = periodic_c.copy()
         self.nbuilds += 1
 
     @property

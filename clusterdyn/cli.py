@@ -1,0 +1,207 @@
+"""The ``clusterdyn`` command.
+
+    clusterdyn run SCENE [--set key=value ...] [--config FILE.toml] [--out DIR] [--json] [--quiet]
+                         [--restart CHECKPOINT]
+    clusterdyn study STUDY [--set key=value ...] [--out DIR] [--json]
+    clusterdyn list
+    clusterdyn materials
+    clusterdyn info FILE.h5md
+    clusterdyn export lammps SCENE [--set ...] --out DIR
+
+Bad input gives one clear line on stderr and exit status 2; a run that goes
+unstable gives one line naming step, particles and quantity and exit status 3.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .errors import InputError, InstabilityError
+
+EXIT_INPUT = 2
+EXIT_INSTABILITY = 3
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError("command line", " ".join(sys.argv[1:]), f"valid arguments ({message})")
+
+
+def _parse_sets(items):
+    out = {}
+    for it in items or []:
+        if "=" not in it:
+            raise InputError("--set", it, "key=value (e.g. u=3km/s)")
+        k, v = it.split("=", 1)
+        k = k.strip()
+        if not k:
+            raise InputError("--set", it, "key=value (e.g. u=3km/s)")
+        out[k] = v.strip()
+    return out
+
+
+def _read_config(path):
+    import tomllib
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("--config", str(path), "an existing TOML file")
+    try:
+        data = tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError("--config", str(path), f"valid TOML ({exc})") from None
+    params = data.get("params", data)
+    if not isinstance(params, dict):
+        raise InputError("--config", str(path), "a table of key = value parameters")
+    out = {}
+    for k, v in params.items():
+        if isinstance(v, dict):
+            raise InputError("--config", f"{k} (a table)", "key = value parameters")
+        out[k] = v if not isinstance(v, list) else "x".join(str(x) for x in v)
+    return out, data.get("scene")
+
+
+def _print_result(res, args):
+    if args.json:
+        print(res.to_json())
+    elif not args.quiet:
+        print(f"\n{res.scene}: results")
+        print(res.table())
+        for f in res.files:
+            print(f"wrote {f}")
+
+
+def cmd_run(args):
+    from .scenes import get_scene
+    overrides = {}
+    if args.config:
+        cfg, scene_name = _read_config(args.config)
+        if scene_name and scene_name != args.scene:
+            raise InputError("--config", args.config, f"a config for scene '{args.scene}' (it is for '{scene_name}')")
+        overrides.update(cfg)
+    overrides.update(_parse_sets(args.set))
+    scene = get_scene(args.scene)
+    kw = {}
+    if args.restart:
+        kw["restart"] = args.restart
+        if not Path(args.restart).is_file():
+            raise InputError("--restart", args.restart, "an existing checkpoint file")
+    out = Path(args.out) if args.out else None
+    res = scene.run(overrides, out=out, progress=not (args.quiet or args.json), **kw)
+    _print_result(res, args)
+    return 0
+
+
+def cmd_study(args):
+    from .studies import get_study
+    study = get_study(args.study)
+    out = Path(args.out) if args.out else None
+    res = study(_parse_sets(args.set), out=out, progress=not (args.quiet or args.json))
+    if args.json:
+        print(json.dumps(res, default=str))
+    return 0
+
+
+def cmd_list(args):
+    from .scenes import all_scenes
+    for name, sc in sorted(all_scenes().items()):
+        print(f"{name}: {sc.description}")
+        for p in sc.params:
+            print(f"    {p.describe()}")
+    return 0
+
+
+def cmd_materials(args):
+    from . import units
+    from .materials import get_material, material_names
+    for name in material_names():
+        m = get_material(name)
+        line = f"{name}: rho0 = {m.rho0 / units.g_cm3:g} g/cm3"
+        if m.curve is not None:
+            line += f", c0 = {m.c0 / units.km_s:.4g} km/s, cold curve {type(m.curve).__name__}"
+        if m.E is not None:
+            line += f", E = {m.E / units.GPa:g} GPa, nu = {m.nu:g}"
+        if m.hugoniot:
+            line += f", reference Hugoniot {m.hugoniot}"
+        print(line)
+        print(f"    source: {m.source}")
+    return 0
+
+
+def cmd_info(args):
+    p = Path(args.file)
+    if not p.is_file():
+        raise InputError("FILE", args.file, "an existing H5MD file")
+    from .io import format_info
+    print(format_info(str(p)))
+    return 0
+
+
+def cmd_export(args):
+    if args.format != "lammps":
+        raise InputError("format", args.format, "lammps")
+    from .io.lammps import export_scene
+    folder = export_scene(args.scene, _parse_sets(args.set), args.out)
+    if not args.quiet:
+        print(f"wrote LAMMPS deck to {folder}")
+    return 0
+
+
+def build_parser():
+    p = _Parser(prog="clusterdyn", description="Cluster Dynamics and Movable Cellular Automata")
+    p.add_argument("--version", action="version", version=f"clusterdyn {__version__}")
+    sub = p.add_subparsers(dest="command", parser_class=_Parser)
+    r = sub.add_parser("run", help="run a scene")
+    r.add_argument("scene")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE")
+    r.add_argument("--config", metavar="FILE.toml")
+    r.add_argument("--out", metavar="DIR")
+    r.add_argument("--json", action="store_true")
+    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--restart", metavar="CHECKPOINT")
+    r.set_defaults(func=cmd_run)
+    s = sub.add_parser("study", help="run a study (hugoniot, convergence, stability)")
+    s.add_argument("study")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE")
+    s.add_argument("--out", metavar="DIR")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_study)
+    sub.add_parser("list", help="scenes and their parameters").set_defaults(func=cmd_list)
+    sub.add_parser("materials", help="the material library").set_defaults(func=cmd_materials)
+    i = sub.add_parser("info", help="summary of an H5MD file")
+    i.add_argument("file")
+    i.set_defaults(func=cmd_info)
+    e = sub.add_parser("export", help="export a scene to another code")
+    e.add_argument("format")
+    e.add_argument("scene")
+    e.add_argument("--set", action="append", metavar="KEY=VALUE")
+    e.add_argument("--out", metavar="DIR", required=True)
+    e.add_argument("--quiet", action="store_true")
+    e.set_defaults(func=cmd_export)
+    return p
+
+
+def main(argv=None):
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if not getattr(args, "command", None):
+            parser.print_help()
+            return EXIT_INPUT
+        return args.func(args)
+    except InputError as exc:
+        print(f"clusterdyn: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except InstabilityError as exc:
+        print(f"clusterdyn: unstable: {exc}", file=sys.stderr)
+        return EXIT_INSTABILITY
+    except KeyboardInterrupt:
+        print("clusterdyn: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

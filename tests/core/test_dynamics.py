@@ -1,0 +1,137 @@
+"""DampedVerlet: energy conservation, damping, momentum, ASE compatibility, stability guards."""
+
+import numpy as np
+import pytest
+from ase.md.verlet import VelocityVerlet
+
+from clusterdyn import units
+from clusterdyn.build import fcc_packing, make_cluster_atoms
+from clusterdyn.calculators import ClusterDynamics
+from clusterdyn.errors import InputError, InstabilityError
+from clusterdyn.md import DampedVerlet, Piston, default_timestep, stability_limit
+
+R0 = 5 * units.um
+
+
+def thermal(atoms, frac=0.01, seed=0):
+    atoms.calc = ClusterDynamics()
+    atoms.calc.setup(atoms)
+    c0 = atoms.calc.potentials[0].c0
+    v = np.random.default_rng(seed).normal(0, frac * c0 / np.sqrt(3), (len(atoms), 3))
+    v -= v.mean(axis=0)
+    atoms.set_velocities(v)
+    return c0
+
+
+def test_energy_conserved_undamped_4000():
+    atoms = fcc_packing("Al", R0, size=(10, 10, 10), pbc=True)
+    assert len(atoms) == 4000
+    thermal(atoms)
+    dyn = DampedVerlet(atoms, J=None)
+    E0 = dyn.get_total_energy()
+    K0 = dyn.get_kinetic_energy()
+    worst = 0.0
+    for _ in range(50):
+        dyn.run(200)
+        worst = max(worst, abs(dyn.get_total_energy() - E0))
+    assert dyn.nsteps == 10_000
+    assert worst < 1e-3 * K0
+
+
+def test_same_trajectory_as_ase_velocity_verlet():
+    a = fcc_packing("Al", R0, size=(3, 3, 3), pbc=True)
+    thermal(a, 0.02, seed=4)
+    b = a.copy()
+    b.calc = ClusterDynamics()
+    d1 = DampedVerlet(a, J=None)
+    d2 = VelocityVerlet(b, timestep=d1.dt)
+    d1.run(300)
+    d2.run(300)
+    np.testing.assert_allclose(a.positions, b.positions, rtol=0, atol=1e-9 * R0)
+    np.testing.assert_allclose(a.get_velocities(), b.get_velocities(), rtol=1e-8, atol=1e-12)
+
+
+def test_damping_conserves_momentum_and_dissipates_two_materials():
+    base = fcc_packing("Al", R0, size=(4, 4, 4), pbc=True)
+    rng = np.random.default_rng(2)
+    mid = (rng.random(len(base)) < 0.5).astype(int)
+    atoms = make_cluster_atoms(base.positions, ["Al", "Pb"], [R0, R0], material_id=mid,
+                               cell=base.cell, pbc=True)
+    atoms.calc = ClusterDynamics()
+    atoms.calc.setup(atoms)
+    v = rng.normal(0, 50 * units.m_s, (len(atoms), 3))
+    atoms.set_velocities(v + np.array([100.0, 200.0, -100.0]) * units.m_s)     # and a net drift
+    p0 = atoms.get_momenta().sum(axis=0)
+    dyn = DampedVerlet(atoms, J=50)
+    windows = []
+    for _ in range(10):
+        es = []
+        for _ in range(10):
+            dyn.run(10)
+            es.append(dyn.get_total_energy())
+        windows.append(np.mean(es))
+    p1 = atoms.get_momenta().sum(axis=0)
+    scale = np.abs(atoms.get_momenta()).sum()
+    assert np.abs(p1 - p0).max() < 1e-12 * scale
+    assert np.all(np.diff(windows) < 0)
+
+
+def test_run_twice_adds_steps_and_observers():
+    atoms = fcc_packing("Al", R0, size=(2, 2, 2), pbc=True)
+    thermal(atoms)
+    dyn = DampedVerlet(atoms, J=None)
+    seen = []
+    dyn.attach(lambda: seen.append(dyn.nsteps), interval=5)
+    dyn.run(10)
+    dyn.run(10)
+    assert dyn.nsteps == 20 and seen == [0, 5, 10, 15, 20]
+
+
+def test_piston_moves_at_its_speed():
+    atoms = fcc_packing("Al", R0, size=(6, 2, 2), pbc=(False, True, True))
+    mask = atoms.positions[:, 0] < 0.5 * R0
+    u = 1 * units.km_s
+    atoms.set_constraint(Piston(mask, u))
+    atoms.calc = ClusterDynamics()
+    atoms.set_momenta(atoms.get_momenta())
+    x0 = atoms.positions[mask, 0].copy()
+    dyn = DampedVerlet(atoms, J=None)
+    dyn.run(100)
+    np.testing.assert_allclose(atoms.positions[mask, 0] - x0, u * dyn.get_time(), rtol=1e-12)
+    assert atoms.constraints[0].force[0] < 0          # the compressed sample pushes back
+
+
+def test_bad_input():
+    atoms = fcc_packing("Al", R0, size=(2, 2, 2), pbc=True)
+    atoms.calc = ClusterDynamics()
+    for J in (0, -5, "x"):
+        with pytest.raises(InputError, match="J="):
+            DampedVerlet(atoms, J=J)
+    atoms.calc.setup(atoms)
+    lim = stability_limit(atoms.calc)
+    assert lim == pytest.approx(0.58 * R0 / atoms.calc.potentials[0].c0, rel=0.05)
+    with pytest.raises(InputError, match="timestep=.*stability"):
+        DampedVerlet(atoms, timestep=1.01 * lim, J=None)
+    with pytest.raises(InputError, match="timestep="):
+        DampedVerlet(atoms, timestep=-1.0, J=None)
+    assert default_timestep(atoms.calc) < 0.06 * lim
+
+
+def test_close_approach_during_run_is_an_instability():
+    atoms = fcc_packing("Al", R0, size=(3, 3, 3), pbc=True)
+    atoms.calc = ClusterDynamics()
+    v = np.zeros((len(atoms), 3))
+    # two neighbours driven head-on, far faster than the lattice can hold them apart
+    i = 0
+    j = int(np.argmin(np.linalg.norm(atoms.positions - atoms.positions[0] - [0, R0 / 2 ** 0.5, R0 / 2 ** 0.5], axis=1)))
+    d = atoms.positions[j] - atoms.positions[i]
+    d /= np.linalg.norm(d)
+    v[i] = 60 * units.km_s * d
+    v[j] = -60 * units.km_s * d
+    atoms.set_velocities(v)
+    dyn = DampedVerlet(atoms, timestep=0.02 * R0 / (5.3 * units.km_s), J=None)
+    with pytest.raises(InstabilityError) as exc:
+        dyn.run(2000)
+    msg = str(exc.value)
+    assert "step" in msg and (f"particles {min(i, j)}, {max(i, j)}" in msg or "particle" in msg)
+    assert exc.value.step is not None and exc.value.step > 0
