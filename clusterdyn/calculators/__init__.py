@@ -3,3 +3,5 @@
 from .cluster import ClusterDynamics
 
 __all__ = ["ClusterDynamics"]
+from ..mca.calculator import MCA  # noqa: E402,F401
+__all__ += ["MCA"]

@@ -13,16 +13,17 @@ sides (equal unless a per-automaton correction, e.g. radial return, made them
 differ), the force on j its opposite: linear and angular momentum are
 conserved pair by pair.
 
-All kernels are module-level ``@njit(cache=True)``; per-automaton sums go
+All kernels are module-level serial ``@njit(cache=True)`` (the samples MCA runs here are
+small; thread start-up costs more than it saves below ~1e5 pairs); per-automaton sums go
 through the incidence lists ``first_n/side_p/side_s`` (CSR: automaton i
 owns sides ``k in range(first_n[i], first_n[i+1])`` = pair ``side_p[k]``,
-side ``side_s[k]``), so the parallel loops never write to shared entries.
+side ``side_s[k]``), so a parallel variant (prange) would never write to shared entries.
 """
 
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
 @njit(cache=True)
@@ -55,19 +56,19 @@ def _rotate(v, phi, out):
     out[2] = v[2] * c + cz * s + kz * kv * (1.0 - c)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c,
                   tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c):
     """Separation, elongation and tangential increment of every pair since the last commit.
 
     Outputs: ``d_pc`` separation, ``r_p`` distance, ``dr_p = r - r_last``,
-    ``arm_p2`` lever arms (``r_last`` split as q0), ``dtau_pc`` tangential
+    ``arm_p2`` lever arms (``r`` split as q0: they sum to r, so torques conserve angular momentum), ``dtau_pc`` tangential
     increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)`` (physics.md 2.4) from the
     objective relative displacement of the two material points at the contact,
     ``taurot_p2c`` the stored tangential forces rotated with the pair.
     """
     npair = i_p.shape[0]
-    for p in prange(npair):
+    for p in range(npair):
         i = i_p[p]
         j = j_p[p]
         d = np.empty(3)
@@ -87,8 +88,8 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
         qs = q0_p2[p, 0] + q0_p2[p, 1]
         ai = rl * q0_p2[p, 0] / qs
         aj = rl * q0_p2[p, 1] / qs
-        arm_p2[p, 0] = ai
-        arm_p2[p, 1] = aj
+        arm_p2[p, 0] = r * q0_p2[p, 0] / qs
+        arm_p2[p, 1] = r * q0_p2[p, 1] / qs
         # material points of i and j that were at the contact point at the last commit
         phi_i = np.empty(3)
         phi_j = np.empty(3)
@@ -136,14 +137,14 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
                 taurot_p2c[p, s, a] = tmp[a] - tn * n[a]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
     """Split the elongation between the two automata (physics.md 2.4).
 
     ``d eps_i = [A_j dr + q0_j (dB_j - dB_i)] / (A_i q0_j + A_j q0_i)`` with
     ``A = 2G`` and ``dB = (1 - 2G/3K) dP``; unlinked pairs get zero.
     """
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         if linked_p[p] == 0:
             deps_p2[p, 0] = 0.0
             deps_p2[p, 1] = 0.0
@@ -157,10 +158,10 @@ def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
         deps_p2[p, 1] = (A_n[i] * dr_p[p] + qi * (dB_n[i] - dB_n[j])) / den
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP_n, dB_n):
     """Mean-stress increment of every automaton: ``dP = K sum_j dq_ij S_ij / Omega`` (MCA 8-9)."""
-    for i in prange(first_n.shape[0] - 1):
+    for i in range(first_n.shape[0] - 1):
         dv = 0.0
         for k in range(first_n[i], first_n[i + 1]):
             p = side_p[k]
@@ -170,11 +171,11 @@ def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega
         dB_n[i] = lk_n[i] * dP_n[i]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc,
                  sigt_p2, taut_p2c):
     """Elastic predictor of linked pairs: ``d sigma = (1-D)(2G d eps + (1-2G/3K) dP)``, ``d tau = (1-D) dtau``."""
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         if linked_p[p] == 0:
             continue
         i = i_p[p]
@@ -187,7 +188,7 @@ def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c
                 taut_p2c[p, s, a] = taurot_p2c[p, s, a] + f * dtau_pc[p, a]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c, dtau_pc,
                   sigt_p2, taut_p2c):
     """Unlinked pairs: repulsion only in contact (``h = r - r0 < 0``) and Coulomb friction.
@@ -196,7 +197,7 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
     ``M = K + 4G/3`` (the two half-automata in series, uniaxial strain);
     tangential force incremental, capped at ``mu |sigma|``; zero when apart.
     """
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         if linked_p[p] != 0:
             continue
         i = i_p[p]
@@ -227,7 +228,7 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
                     taut_p2c[p, s, a] *= sc
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
                    omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
     """Forces, torques, Love-Weber stress and elastic energy of every automaton.
@@ -237,7 +238,7 @@ def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side
     ``sigma^i = (1/Omega_i) sum_j q_ij S (sigma_ij n + tau_ij) (x) n`` (symmetrised);
     ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
     """
-    for i in prange(first_n.shape[0] - 1):
+    for i in range(first_n.shape[0] - 1):
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -300,7 +301,7 @@ def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side
         e_n[i] = omega_n[i] * (ss / (4.0 * G_n[i]) + P * P / (2.0 * K_n[i]))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def pair_damping(vel_nc, om_nc, i_p, j_p, d_pc, r_p, arm_p2, c_p, f_nc_out, t_nc_out,
                  first_n, side_p, side_s):
     """Viscous damping of the relative velocity at the contact point of every pair.
@@ -309,7 +310,7 @@ def pair_damping(vel_nc, om_nc, i_p, j_p, d_pc, r_p, arm_p2, c_p, f_nc_out, t_nc
     torques ``a n x f`` on both: momentum and angular momentum conserved.
     Writes per automaton (``f_nc_out``, ``t_nc_out`` overwritten).
     """
-    for i in prange(first_n.shape[0] - 1):
+    for i in range(first_n.shape[0] - 1):
         fx = 0.0
         fy = 0.0
         fz = 0.0

@@ -8,7 +8,7 @@ uniaxial tension and sigma_c in uniaxial compression.
 
 import math
 
-from numba import njit, prange
+from numba import njit
 
 
 @njit(cache=True)
@@ -27,14 +27,14 @@ def drucker_prager(s_ncc, i, j, beta):
     return 0.5 * (beta + 1.0) * sint + 1.5 * (beta - 1.0) * m
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def fracture(i_p, j_p, linked_p, s_ncc, sigc_p, beta_p, sig_p2, tau_p2c, broken_p):
     """Unlink every linked pair at or above the criterion; its forces drop to the contact law.
 
     ``broken_p`` (int8) is set to 1 for the pairs unlinked now.  Returns the count.
     """
     n = 0
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         broken_p[p] = 0
         if linked_p[p] == 0 or sigc_p[p] <= 0.0:
             continue

@@ -9,16 +9,16 @@ sigma_c only asymptotically; ``D_c < 1`` is the material parameter that keeps
 the peak finite, default 0.8.)
 """
 
-from numba import njit, prange
+from numba import njit
 
 from .brittle import drucker_prager
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def degrade(i_p, j_p, linked_p, s_ncc, sigd_p, sigc_p, beta_p, Dc_p, D_p, sig_p2, tau_p2c, broken_p):
     """Update the damage of linked pairs; unlink at sigma_c.  Returns the number unlinked."""
     n = 0
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         broken_p[p] = 0
         if linked_p[p] == 0 or sigc_p[p] <= 0.0:
             continue

@@ -8,14 +8,14 @@ pair continues from its current forces with the linked (incremental) law, so
 nothing jumps; pulled apart afterwards it carries tension up to its strength.
 """
 
-from numba import njit, prange
+from numba import njit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def weld(linked_p, sig_p2, r_p, r0_p, sigw_p, nweld_p, count_p, welded_p):
     """Count compressed steps of unlinked pairs, relink those that reached n_weld.  Returns the count."""
     n = 0
-    for p in prange(linked_p.shape[0]):
+    for p in range(linked_p.shape[0]):
         welded_p[p] = 0
         if linked_p[p] != 0 or sigw_p[p] <= 0.0:
             continue

@@ -12,7 +12,7 @@ interpolated linearly and held constant beyond its last point.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
 @njit(cache=True)
@@ -31,7 +31,7 @@ def yield_stress(eps_p, tab_e, tab_s, m):
     return s[k - 1], 0.0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, tab_s, soft_n,
                   epsp_n, sig_p2, tau_p2c, M_n):
     """Return every yielding automaton to its yield surface; returns the number that yielded.
@@ -40,7 +40,7 @@ def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, 
     ``M_n`` receives the scale factor (1 where elastic).
     """
     n = 0
-    for i in prange(first_n.shape[0] - 1):
+    for i in range(first_n.shape[0] - 1):
         M_n[i] = 1.0
         m = mat_n[i]
         if plastic_m[m] == 0:

@@ -7,13 +7,13 @@ pair's modulus and the yield stress of its automata (mean over their pairs),
 so the stress-strain curve softens after the plateau.
 """
 
-from numba import njit, prange
+from numba import njit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def degrade_plastic(i_p, j_p, linked_p, epsp_n, epsd_p, epsf_p, D_p, sig_p2, tau_p2c, broken_p):
     n = 0
-    for p in prange(i_p.shape[0]):
+    for p in range(i_p.shape[0]):
         broken_p[p] = 0
         if linked_p[p] == 0 or epsf_p[p] <= 0.0:
             continue
@@ -35,10 +35,10 @@ def degrade_plastic(i_p, j_p, linked_p, epsp_n, epsd_p, epsf_p, D_p, sig_p2, tau
     return n
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def softening(first_n, side_p, D_p, soft_n):
     """Yield-stress factor of each automaton: 1 - mean damage of its pairs."""
-    for i in prange(first_n.shape[0] - 1):
+    for i in range(first_n.shape[0] - 1):
         k0 = first_n[i]
         k1 = first_n[i + 1]
         if k1 == k0:

@@ -1,0 +1,412 @@
+"""MCADynamics: velocity Verlet for translations and rotations, and the MCA pair state.
+
+Each step (``dt``):
+
+1. half kick ``V += dt/2 F/m``, ``omega += dt/2 T/J`` (spheres: ``J = m d^2/10``;
+   2D cylinders about z: ``J = m d^2/8``; isotropic J, so no gyroscopic term);
+   grips impose their velocity;
+2. drift ``R += dt V``, ``theta += dt omega``;
+3. trial forces from the calculator at the new positions (state unchanged);
+4. *commit*: the trial pair forces become the state, then the response
+   functions the materials use run (radial return, damage, fracture,
+   healing); if they changed anything the forces are evaluated again at the
+   same positions (the state is never changed inside a property call);
+5. half kick with the new forces (plus the optional pair damping), grips again.
+
+Stored elastic energy (physics.md 2.5): the work of the pair forces, accumulated
+trapezoidally, ``W += -1/2 (F_n + F_{n+1}) . dR - 1/2 (T_n + T_{n+1}) . dtheta``;
+``kinetic + rotational + stored`` is conserved to O(dt^2) without damping.
+
+Dissipation and driving live here, not in the calculator: viscous damping of
+the relative velocity at the contact point of every pair (``damping`` = fraction
+of the critical damping of a pair), and grips.
+"""
+
+import math
+
+import numpy as np
+from ase.md.md import MolecularDynamics
+
+from ..errors import InputError, InstabilityError
+from ..neighbors import NeighborList
+from . import kernels as K
+from .response import brittle, degrading, healing, plastic, plastic_degrading
+
+#: time step = COURANT * d_min / c_L,max by default; STABILITY_COURANT is the measured limit
+COURANT = 0.15
+STABILITY_COURANT = 0.5
+
+
+def wave_speeds(material):
+    """(c_L, c_S) of a material, Angstrom per ASE time unit."""
+    Kb, G, rho = material.K, material.G, material.rho0
+    return math.sqrt((Kb + 4.0 * G / 3.0) / rho), math.sqrt(G / rho)
+
+
+def default_timestep(atoms, materials=None, courant=COURANT):
+    """``dt = C d / c_L`` minimised over automata (C = 0.15; the limit measured is about 0.5)."""
+    from .state import mca_materials_of
+    mats = mca_materials_of(atoms, materials)
+    cl = np.array([wave_speeds(m)[0] for m in mats])
+    d = 2.0 * np.asarray(atoms.arrays["radius"])
+    mid = np.asarray(atoms.arrays["material"])
+    return float(courant * np.min(d / cl[mid]))
+
+
+def smooth_ramp(t, ramp_time):
+    """0 -> 1 over ``ramp_time`` with zero slope at both ends (half cosine)."""
+    if ramp_time <= 0 or t >= ramp_time:
+        return 1.0
+    if t <= 0:
+        return 0.0
+    return 0.5 * (1.0 - math.cos(math.pi * t / ramp_time))
+
+
+class Grip:
+    """A layer of automata driven with a smoothly ramped velocity along ``axis``.
+
+    Parameters
+    ----------
+    ids : array of particle ids (``atoms.arrays['id']``) or a boolean mask over rows
+    axis : 0, 1, 2
+    velocity : float (Angstrom / ASE time) reached after ``ramp_time``, or a
+        callable ``v(t)`` (t in ASE time) for load paths (unload, reload)
+    ramp_time : float, ASE time
+    lateral : "free" (default) or "fixed" (lateral velocity zero)
+
+    The grip automata do not rotate.  ``reaction`` is the force the sample
+    exerts on the grip along ``axis`` at the last step (eV/Angstrom).
+    """
+
+    def __init__(self, ids, axis, velocity, ramp_time=0.0, lateral="free"):
+        self.ids = np.asarray(ids)
+        if axis not in (0, 1, 2):
+            raise InputError("axis", axis, "0, 1 or 2")
+        if lateral not in ("free", "fixed"):
+            raise InputError("lateral", lateral, "'free' or 'fixed'")
+        self.axis = axis
+        self.velocity = velocity
+        self.ramp_time = float(ramp_time)
+        self.lateral = lateral
+        self.reaction = 0.0
+        self.displacement = 0.0
+
+    def v(self, t):
+        if callable(self.velocity):
+            return float(self.velocity(t))
+        return float(self.velocity) * smooth_ramp(t, self.ramp_time)
+
+    def rows(self, atoms):
+        if self.ids.dtype == bool:
+            return np.nonzero(self.ids)[0]
+        ids = atoms.arrays["id"]
+        return np.nonzero(np.isin(ids, self.ids))[0]
+
+
+class MCADynamics(MolecularDynamics):
+    """Movable Cellular Automata dynamics (ASE MolecularDynamics).
+
+    Parameters
+    ----------
+    atoms : Atoms with an :class:`~clusterdyn.mca.calculator.MCA` calculator
+    timestep : float, ASE time; default :func:`default_timestep` (C = 0.15)
+    damping : float, fraction of critical damping of the relative pair velocity
+        (0 = off, for wave and conservation problems; ~0.1-0.5 quasi-static)
+    grips : list of :class:`Grip`
+    contact_every : int, steps between searches for new contacts (only when the
+        sample can fracture or has pre-cracks)
+    check_timestep : raise InstabilityError if ``timestep`` exceeds the measured limit
+    """
+
+    def __init__(self, atoms, timestep=None, *, damping=0.0, grips=(), contact_every=10,
+                 check_timestep=True, trajectory=None, logfile=None, loginterval=1, **kw):
+        calc = atoms.calc
+        from .calculator import MCA
+        if not isinstance(calc, MCA):
+            raise InputError("atoms.calc", type(calc).__name__, "an MCA calculator")
+        self.state = calc.setup(atoms)
+        st = self.state
+        dt_def = default_timestep(atoms, st.materials)
+        if timestep is None:
+            timestep = dt_def
+        limit = dt_def * STABILITY_COURANT / COURANT
+        if not timestep > 0:
+            raise InputError("timestep", timestep, "a positive time step")
+        if check_timestep and timestep > limit:
+            raise InstabilityError(
+                "time step above the stability limit of MCA (dt = C d/c_L with C <= "
+                f"{STABILITY_COURANT}); use timestep=None for the default C = {COURANT}",
+                quantity="timestep", value=timestep, limit=limit)
+        super().__init__(atoms, timestep, trajectory=trajectory, logfile=logfile,
+                         loginterval=loginterval, **kw)
+        if not 0.0 <= damping:
+            raise InputError("damping", damping, "a fraction of critical damping >= 0")
+        self.damping = float(damping)
+        self.grips = list(grips)
+        self.contact_every = int(contact_every)
+        self.stored_work = 0.0
+        self.dissipated = 0.0
+        n = len(atoms)
+        for name in ("omega", "theta"):
+            if name not in atoms.arrays:
+                atoms.new_array(name, np.zeros((n, 3)))
+        self._nl = None
+        self._F = None
+        self._setup_masses()
+        self._evaluate(commit=False)
+
+    # ------------------------------------------------------------------ helpers
+    def _setup_masses(self):
+        atoms = self.atoms
+        m = atoms.get_masses()
+        d = 2.0 * atoms.arrays["radius"]
+        self.J = m * d * d / (8.0 if self.state.dim == 2 else 10.0)
+        if self.damping > 0:
+            st = self.state
+            i_p, j_p = st.pair_rows(atoms)[:2]
+            mid = st.mat_id_n[st.pair_rows(atoms)[5]]
+            M = st.K_m[mid] + 4.0 * st.G_m[mid] / 3.0
+            k_p = 0.5 * (M[i_p] + M[j_p]) * st.S_p / st.r0_p
+            mred = m[i_p] * m[j_p] / (m[i_p] + m[j_p])
+            self._c_p = 2.0 * self.damping * np.sqrt(k_p * mred)
+
+    def todict(self):
+        d = super().todict()
+        d.update({"damping": self.damping, "contact_every": self.contact_every,
+                  "grips": len(self.grips)})
+        return d
+
+    @property
+    def time(self):
+        return self.state.time
+
+    def _evaluate(self, commit=True):
+        atoms = self.atoms
+        calc = atoms.calc
+        st = self.state
+        out = calc.evaluate(atoms, st)
+        if commit:
+            changed = self.commit(out)
+            if changed:
+                f_trial = out["f_nc"]
+                out = calc.evaluate(atoms, st)
+                out["f_trial"] = f_trial
+        self._F = out["f_nc"]
+        self._T = out["t_nc"]
+        self.trial = out
+        # the evaluation is the calculator's result for these positions and this state
+        calc.atoms = atoms.copy()
+        calc.results = {}
+        calc._fill_results(out)
+        calc.trial = out
+        calc._state_version = st.version
+        return out
+
+    def _refresh_properties(self):
+        pass      # the step already left the calculator's results up to date
+
+    def commit(self, out):
+        """Make the trial state the state, then run the response functions; returns #changes."""
+        st = self.state
+        perm = out["perm"]
+        st.sig_p2 = out["sig_p2"]
+        st.tau_p2c = out["tau_p2c"]
+        st.dlast_pc = out["d_pc"]
+        st.thlast_nc[perm] = out["theta_nc"]
+        i_p, j_p, first_n, side_p, side_s, _ = st.pair_rows(self.atoms)
+        s = out["s_ncc"]
+        changed = 0
+        P = st.npairs
+        fl = st.flags
+        self.broken_now = np.zeros(P, np.int8)
+        if fl["plastic"]:
+            mid = st.mat_id_n[perm]
+            soft = np.ones(len(perm))
+            if fl["plastic_degrading"]:
+                plastic_degrading.softening(first_n, side_p, st.D_p, soft)
+            epsp = st.epsp_n[perm]
+            Mn = np.empty(len(perm))
+            changed += plastic.radial_return(s, first_n, side_p, side_s, mid, st.plastic_m,
+                                             st.G_m[mid], st.tab_e, st.tab_s, soft, epsp,
+                                             st.sig_p2, st.tau_p2c, Mn)
+            st.epsp_n[perm] = epsp
+            if fl["plastic_degrading"]:
+                changed += plastic_degrading.degrade_plastic(i_p, j_p, st.linked_p, epsp, st.epsd_p,
+                                                             st.epsf_p, st.D_p, st.sig_p2,
+                                                             st.tau_p2c, self.broken_now)
+        if fl["degrading"]:
+            changed += degrading.degrade(i_p, j_p, st.linked_p, s, st.sigd_p, st.sigc_p, st.beta_p,
+                                         st.Dc_p, st.D_p, st.sig_p2, st.tau_p2c, self.broken_now)
+        elif fl["fracture"]:
+            changed += brittle.fracture(i_p, j_p, st.linked_p, s, st.sigc_p, st.beta_p, st.sig_p2,
+                                        st.tau_p2c, self.broken_now)
+        if fl["healing"]:
+            welded = np.zeros(P, np.int8)
+            nw = healing.weld(st.linked_p, st.sig_p2, out["r_p"], st.r0_p, st.sigw_p, st.nweld_p,
+                              st.count_p, welded)
+            if nw:
+                st.D_p[welded == 1] = 0.0
+                changed += nw
+        st.version += 1
+        return changed
+
+    def _damping_forces(self, v, w):
+        atoms = self.atoms
+        st = self.state
+        i_p, j_p, first_n, side_p, side_s, _ = st.pair_rows(atoms)
+        fd = np.empty_like(v)
+        td = np.empty_like(v)
+        K.pair_damping(v, w, i_p, j_p, self.trial["d_pc"], self.trial["r_p"], self.trial["arm_p2"],
+                       self._c_p, fd, td, first_n, side_p, side_s)
+        if st.dim == 2:
+            fd[:, 2] = 0.0
+            td[:, :2] = 0.0
+        return fd, td
+
+    def _apply_grips(self, v, w, t):
+        for g in self.grips:
+            rows = g.rows(self.atoms)
+            v[rows, g.axis] = g.v(t)
+            if g.lateral == "fixed":
+                for a in range(3):
+                    if a != g.axis:
+                        v[rows, a] = 0.0
+            w[rows] = 0.0
+
+    def _contacts(self):
+        st = self.state
+        atoms = self.atoms
+        rad = atoms.arrays["radius"]
+        skin = 0.25
+        if self._nl is None:
+            self._nl = NeighborList(2.0 * rad.max() * (1.0 + skin), 0.0, half=True)
+            S_mean = np.bincount(np.concatenate([st.pair_rows(atoms)[0], st.pair_rows(atoms)[1]]),
+                                 weights=np.concatenate([st.S_p, st.S_p]), minlength=len(atoms))
+            cnt = np.bincount(np.concatenate([st.pair_rows(atoms)[0], st.pair_rows(atoms)[1]]),
+                              minlength=len(atoms))
+            self._S_mean = S_mean / np.maximum(cnt, 1)
+        nl = self._nl
+        nl.build(atoms.positions, atoms.cell.array, atoms.pbc)
+        i, j, _, r = nl.pairs(atoms.positions)
+        close = r < (rad[i] + rad[j]) * (1.0 + skin)
+        i, j = i[close], j[close]
+        ids = atoms.arrays["id"]
+        a, b = np.minimum(ids[i], ids[j]), np.maximum(ids[i], ids[j])
+        M = int(ids.max()) + 1
+        keys = a * M + b
+        have = st.pid_p2[:, 0] * M + st.pid_p2[:, 1]
+        new = ~np.isin(keys, have)
+        if new.any():
+            keys_new, first = np.unique(keys[new], return_index=True)
+            ii, jj = i[new][first], j[new][first]
+            S_new = 0.5 * (self._S_mean[ii] + self._S_mean[jj])
+            st.add_pairs(atoms.positions, ids, rad, ii, jj, S_new)
+            if self.damping > 0:
+                self._setup_masses()
+
+    # ------------------------------------------------------------------ the step
+    def step(self, forces=None):
+        atoms = self.atoms
+        st = self.state
+        dt = self.dt
+        m = atoms.get_masses()[:, None]
+        J = self.J[:, None]
+        v = atoms.get_velocities()
+        w = atoms.arrays["omega"].copy()
+        F0, T0 = self._F, self._T
+        Fe, Te = F0, T0
+        if self.damping > 0:
+            fd, td = self._damping_forces(v, w)
+            Fe, Te = F0 + fd, T0 + td
+        v += 0.5 * dt * Fe / m
+        w += 0.5 * dt * Te / J
+        t_half = st.time + 0.5 * dt
+        self._apply_grips(v, w, t_half)
+        if st.dim == 2:
+            v[:, 2] = 0.0
+            w[:, :2] = 0.0
+        dx = dt * v
+        dth = dt * w
+        atoms.set_positions(atoms.positions + dx, apply_constraint=False)
+        atoms.arrays["theta"] += dth
+        st.step += 1
+        st.time += dt
+        if st.flags["contacts"] and self.contact_every > 0 and st.step % self.contact_every == 0:
+            self._contacts()
+        out = self._evaluate(commit=True)
+        self._check(out)
+        F1, T1 = self._F, self._T
+        self.stored_work -= 0.5 * (np.sum((F0 + out_f_trial(out, F1)) * dx)
+                                   + np.sum((T0 + T1) * dth))
+        Fe, Te = F1, T1
+        if self.damping > 0:
+            fd, td = self._damping_forces(v, w)
+            Fe, Te = F1 + fd, T1 + td
+            self.dissipated -= np.sum(fd * dx) + np.sum(td * dth)
+        v += 0.5 * dt * Fe / m
+        w += 0.5 * dt * Te / J
+        self._apply_grips(v, w, st.time)
+        for g in self.grips:
+            rows = g.rows(atoms)
+            g.reaction = -float(Fe[rows, g.axis].sum())
+            g.displacement += float(dx[rows, g.axis].mean()) if len(rows) else 0.0
+        if st.dim == 2:
+            v[:, 2] = 0.0
+            w[:, :2] = 0.0
+        atoms.set_velocities(v)
+        atoms.arrays["omega"][:] = w
+        return F1
+
+    def _check(self, out):
+        st = self.state
+        lk = st.linked_p == 1
+        if lk.any():
+            strain = np.abs(out["r_p"][lk] - st.r0_p[lk]) / st.r0_p[lk]
+            k = int(np.argmax(strain))
+            if strain[k] > 0.5:
+                p = np.nonzero(lk)[0][k]
+                raise InstabilityError(
+                    "a linked pair stretched or compressed by more than half its rest distance: "
+                    f"unstable; reduce the time step (now {self.dt:.4g}, default "
+                    f"{default_timestep(self.atoms, st.materials):.4g}) or the loading rate",
+                    step=st.step, particles=st.pid_p2[p], quantity="pair strain",
+                    value=float(strain[k]), limit=0.5)
+
+    # ------------------------------------------------------------------ energies
+    def kinetic_energy(self):
+        v = self.atoms.get_velocities()
+        w = self.atoms.arrays["omega"]
+        m = self.atoms.get_masses()
+        return 0.5 * float(np.sum(m[:, None] * v * v)), 0.5 * float(np.sum(self.J[:, None] * w * w))
+
+    def total_energy(self):
+        """kinetic + rotational + stored work (eV)."""
+        kt, kr = self.kinetic_energy()
+        return kt + kr + self.stored_work
+
+    # ------------------------------------------------------------------ checkpoint
+    def get_state(self):
+        """All per-pair and per-automaton history plus step, time and energy counters."""
+        d = self.state.get_state()
+        d["stored_work"] = float(self.stored_work)
+        d["dissipated"] = float(self.dissipated)
+        d["nsteps"] = int(self.nsteps)
+        d["grip_displacement"] = np.array([g.displacement for g in self.grips])
+        return d
+
+    def set_state(self, d):
+        """Restore :meth:`get_state`; the Atoms (positions, momenta, theta, omega) come separately."""
+        self.state.set_state(d)
+        self.stored_work = float(d.get("stored_work", 0.0))
+        self.dissipated = float(d.get("dissipated", 0.0))
+        self.nsteps = int(d.get("nsteps", self.state.step))
+        for g, x in zip(self.grips, np.atleast_1d(d.get("grip_displacement", []))):
+            g.displacement = float(x)
+        self._nl = None
+        self._setup_masses()
+        self._evaluate(commit=False)
+
+
+def out_f_trial(out, F1):
+    """Forces of the trial evaluation (before response corrections) for the work integral."""
+    return out.get("f_trial", F1)

@@ -1,0 +1,337 @@
+"""The MCA state: pair table keyed by stable ids, per-pair and per-automaton history.
+
+Owned by :class:`~clusterdyn.mca.dynamics.MCADynamics` (the calculator reads
+it, never writes it).  A pair is a row of the pair table; its partners are
+stable particle ids (``atoms.arrays['id']``), so sorting or slicing the Atoms
+does not lose the history.  Rows of the Atoms are found from ids at every
+evaluation.
+
+Per pair (``_p``; ``_p2`` per side, ``_pc`` vector):
+``pid_p2`` ids (i < j), ``linked_p`` (1 linked, 0 unlinked), ``S_p`` contact
+area, ``q0_p2`` rest distances centre -> contact, ``r0_p`` contact rest
+distance, ``sig_p2`` / ``tau_p2c`` specific normal / tangential force (the
+committed values), ``dlast_pc`` separation at the last commit, ``D_p``
+damage, ``count_p`` compressed steps (healing), and the per-pair material
+parameters (strengths, friction, welding threshold) fixed at set-up.
+
+Per automaton (``_n``, by row at set-up, stored by id): ``thlast_nc``
+rotation at the last commit, ``epsp_n`` plastic strain, ``omega_n`` volume.
+"""
+
+import numpy as np
+
+from ..errors import InputError
+from ..materials import get_material
+from .geometry import tessellate
+from .kernels import incidence
+from .materials import check_mca_material
+from .response.plastic import hardening_table
+
+#: per-pair arrays that are history (checkpointed); the rest are set-up constants (also checkpointed)
+PAIR_ARRAYS = ("pid_p2", "linked_p", "S_p", "q0_p2", "r0_p", "sig_p2", "tau_p2c", "dlast_pc", "D_p",
+               "count_p", "sigc_p", "beta_p", "mu_p", "sigw_p", "nweld_p", "sigd_p", "Dc_p",
+               "epsd_p", "epsf_p")
+ATOM_ARRAYS = ("id_n", "thlast_nc", "epsp_n", "omega_n")
+
+
+def mca_materials_of(atoms, materials=None):
+    """List of Material records indexed by ``atoms.arrays['material']``."""
+    if materials is None:
+        materials = atoms.info.get("mca_materials")
+    if materials is None:
+        raise InputError("materials", None, "a list of materials (or atoms built by mca_packing)")
+    if not isinstance(materials, (list, tuple)):
+        materials = [materials]
+    mats = [check_mca_material(get_material(m)) for m in materials]
+    mid = atoms.arrays.get("material")
+    if mid is not None and len(mid) and (mid.min() < 0 or mid.max() >= len(mats)):
+        raise InputError("material", int(mid.max()), f"material ids in [0, {len(mats) - 1}]")
+    return mats
+
+
+def detect_dim(atoms, dim=None):
+    """3, or 2 for plane strain; a 2D call on a 3D sample raises InputError."""
+    info_dim = atoms.info.get("mca_dim", 3)
+    if dim is None:
+        dim = info_dim
+    if dim not in (2, 3):
+        raise InputError("dim", dim, "2 (plane strain) or 3")
+    if dim == 2:
+        z = atoms.positions[:, 2]
+        r = atoms.arrays["radius"]
+        if len(z) and np.ptp(z) > 1e-6 * r.max():
+            raise InputError("dim", 2, "a planar sample (all z equal) for plane strain; this sample "
+                             f"spans {np.ptp(z):.4g} A in z (a 3D sample: use dim=3)")
+    return dim
+
+
+class MCAState:
+    """Pair table and history of an MCA sample (see module docstring).
+
+    Parameters
+    ----------
+    atoms : ase.Atoms with arrays ``radius``, ``id``, ``material``
+    materials : list of Material (default ``atoms.info['mca_materials']``)
+    interfaces : dict {(m1, m2): (sigma_t, sigma_c)}, optional
+        Strength of pairs joining materials m1 and m2; default: the weaker
+        of the two (smaller sigma_t and sigma_c).
+    dim : 3 or 2
+    """
+
+    def __init__(self, atoms, materials=None, interfaces=None, dim=None):
+        for name in ("radius", "id", "material"):
+            if name not in atoms.arrays:
+                raise InputError("atoms", f"no array '{name}'",
+                                 "atoms with arrays radius, id, material (use mca_packing)")
+        self.dim = detect_dim(atoms, dim)
+        self.materials = mca_materials_of(atoms, materials)
+        self.interfaces = dict(interfaces or {})
+        self.version = 0
+        self.step = 0
+        self.time = 0.0
+        ids = np.asarray(atoms.arrays["id"], np.int64)
+        if len(np.unique(ids)) != len(ids):
+            raise InputError("id", "duplicates", "unique particle ids")
+        pos = atoms.get_positions()
+        geom = tessellate(pos, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, self.dim)
+        self.box_c, self.periodic_c = _box(atoms)
+        i, j = geom["i_p"], geom["j_p"]
+        npair = len(i)
+        a, b = ids[i], ids[j]
+        swap = a > b
+        pid = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
+        q0 = geom["q_p2"].copy()
+        q0[swap] = q0[swap][:, ::-1]
+        order = np.lexsort((pid[:, 1], pid[:, 0]))
+        self.pid_p2 = np.ascontiguousarray(pid[order])
+        self.S_p = geom["S_p"][order].copy()
+        self.q0_p2 = np.ascontiguousarray(q0[order])
+        self.linked_p = np.ones(npair, np.int8)
+        self.sig_p2 = np.zeros((npair, 2))
+        self.tau_p2c = np.zeros((npair, 2, 3))
+        self.D_p = np.zeros(npair)
+        self.count_p = np.zeros(npair, np.int64)
+        self.id_n = ids.copy()
+        self.omega_n = geom["omega_n"].copy()
+        self.vcell_n = geom["vcell_n"].copy()
+        self.thlast_nc = np.array(atoms.arrays.get("theta", np.zeros((len(atoms), 3))), float)
+        self.epsp_n = np.zeros(len(atoms))
+        rows = self.rows(ids)
+        ii, jj = rows[self.pid_p2[:, 0]], rows[self.pid_p2[:, 1]]
+        d = pos[jj] - pos[ii]
+        _min_image_np(d, self.box_c, self.periodic_c)
+        self.dlast_pc = np.ascontiguousarray(d)
+        self.r0_p = np.linalg.norm(d, axis=1)
+        self._material_setup(atoms, ii, jj)
+        cracks = atoms.info.get("mca_cracks", [])
+        for c in cracks:
+            self.unlink_across(pos, ii, jj, **c)
+        self._inc_key = None
+
+    # ------------------------------------------------------------------ set-up
+    def _material_setup(self, atoms, ii, jj):
+        mats = self.materials
+        mid = np.asarray(atoms.arrays["material"], np.int64)
+        self.mat_id_n = mid.copy()
+        G = np.array([m.G for m in mats])
+        K = np.array([m.K for m in mats])
+        self.G_m, self.K_m = G, K
+        self.rho_m = np.array([m.rho0 for m in mats])
+        resp = [m.response or "elastic" for m in mats]
+        self.responses = resp
+        npair = len(ii)
+        mi, mj = mid[ii], mid[jj]
+
+        def pairval(f, default=0.0):
+            vals = np.array([default if f(m) is None else f(m) for m in mats], float)
+            return vals
+
+        st = pairval(lambda m: m.sigma_t, np.inf)
+        sc = pairval(lambda m: m.sigma_c, np.inf)
+        brittle = np.array([r in ("elastic-brittle", "degrading") for r in resp])
+        st[~brittle] = np.inf
+        sc[~brittle] = np.inf
+        sig_t = np.minimum(st[mi], st[mj])
+        sig_c = np.minimum(sc[mi], sc[mj])
+        for (m1, m2), (t, c) in self.interfaces.items():
+            if not (t > 0 and c >= t):
+                raise InputError("interfaces", {(m1, m2): (t, c)},
+                                 "0 < sigma_t <= sigma_c for every interface")
+            sel = ((mi == m1) & (mj == m2)) | ((mi == m2) & (mj == m1))
+            sig_t[sel] = t
+            sig_c[sel] = c
+        finite = np.isfinite(sig_t) & np.isfinite(sig_c)
+        self.sigc_p = np.where(finite, sig_c, 0.0)
+        self.beta_p = np.where(finite, sig_c / np.where(finite, sig_t, 1.0), 1.0)
+        mu = pairval(lambda m: m.extra.get("mu", 0.3))
+        self.mu_p = 0.5 * (mu[mi] + mu[mj])
+        sw = pairval(lambda m: m.extra.get("sigma_weld"), 0.0)
+        self.sigw_p = np.maximum(sw[mi], sw[mj]) * ((sw[mi] > 0) & (sw[mj] > 0))
+        nw = pairval(lambda m: m.extra.get("n_weld", 20))
+        self.nweld_p = np.maximum(nw[mi], nw[mj]).astype(np.int64)
+        sd = np.array([m.extra.get("sigma_d", 0.7 * m.sigma_c) if r == "degrading" else np.inf
+                       for m, r in zip(mats, resp)])
+        self.sigd_p = np.minimum(sd[mi], sd[mj])
+        self.sigd_p[~np.isfinite(self.sigd_p)] = 0.0
+        dc = pairval(lambda m: m.extra.get("D_c", 0.8))
+        self.Dc_p = np.where((np.array(resp)[mi] == "degrading") | (np.array(resp)[mj] == "degrading"),
+                             np.maximum(dc[mi], dc[mj]), 0.0)
+        ed = pairval(lambda m: m.extra.get("eps_d", 0.05))
+        ef = np.array([m.extra.get("eps_f", 0.2) if r == "plastic-degrading" else 0.0
+                       for m, r in zip(mats, resp)])
+        self.epsd_p = np.minimum(ed[mi], ed[mj])
+        self.epsf_p = np.maximum(ef[mi], ef[mj]) * ((ef[mi] > 0) | (ef[mj] > 0))
+        # plasticity tables
+        self.plastic_m = np.array([r in ("elastic-plastic", "plastic-degrading") for r in resp], np.int8)
+        tabs = [hardening_table(m) if p else (np.array([0.0, 1.0]), np.array([np.inf, np.inf]))
+                for m, p in zip(mats, self.plastic_m)]
+        k = max(len(t[0]) for t in tabs)
+        self.tab_e = np.zeros((len(mats), k))
+        self.tab_s = np.zeros((len(mats), k))
+        for q, (e, s) in enumerate(tabs):
+            # pad by repeating the last point far out
+            self.tab_e[q] = np.concatenate([e, e[-1] + 1.0 + np.arange(k - len(e))])
+            self.tab_s[q] = np.concatenate([s, np.full(k - len(e), s[-1])])
+        # kernel selection (a term a sample does not use is never run)
+        self.flags = {
+            "fracture": bool(np.any(self.sigc_p > 0)) and not any(r == "degrading" for r in resp),
+            "degrading": any(r == "degrading" for r in resp),
+            "plastic": bool(self.plastic_m.any()),
+            "plastic_degrading": any(r == "plastic-degrading" for r in resp),
+            "healing": bool(np.any(self.sigw_p > 0)),
+        }
+        self.flags["contacts"] = (self.flags["fracture"] or self.flags["degrading"]
+                                  or self.flags["plastic_degrading"])
+
+    def unlink_across(self, pos, ii, jj, point, normal, extent=None, **_):
+        """Unlink the pairs whose segment crosses the plane (point, normal) within ``extent``.
+
+        ``extent`` is None (whole plane) or a (3,) array of half-lengths of the
+        crack region around ``point`` (Angstrom, per axis; 0 along the normal).
+        Returns the number of pairs unlinked.
+        """
+        point = np.asarray(point, float)
+        normal = np.asarray(normal, float)
+        normal = normal / np.linalg.norm(normal)
+        xi = pos[ii]
+        xj = xi + self.dlast_pc
+        si = (xi - point) @ normal
+        sj = (xj - point) @ normal
+        cross = (si * sj < 0)
+        t = si / np.where(cross, si - sj, 1.0)
+        xc = xi + t[:, None] * (xj - xi)
+        if extent is not None:
+            ext = np.asarray(extent, float)
+            inside = np.all(np.abs(xc - point) <= ext + 1e-12 + np.abs(normal) * 1e30, axis=1)
+            cross &= inside
+        self.linked_p[cross] = 0
+        self.flags["contacts"] = True
+        self.version += 1
+        return int(cross.sum())
+
+    # ------------------------------------------------------------------ access
+    @property
+    def npairs(self):
+        return len(self.S_p)
+
+    def rows(self, ids):
+        m = np.full(int(ids.max()) + 1 if len(ids) else 1, -1, np.int64)
+        m[ids] = np.arange(len(ids))
+        return m
+
+    def pair_rows(self, atoms):
+        """(i_p, j_p, first_n, side_p, side_s, perm_n): rows of the current Atoms (cached by ids)."""
+        ids = np.asarray(atoms.arrays["id"], np.int64)
+        key = (ids.tobytes(), self.npairs, self.version_pairs)
+        if self._inc_key != key:
+            if len(ids) != len(self.id_n) or not np.array_equal(np.sort(ids), np.sort(self.id_n)):
+                raise InputError("atoms", "different particle ids",
+                                 "the automata the MCA state was built for (same ids)")
+            rows = self.rows(ids)
+            i_p = rows[self.pid_p2[:, 0]]
+            j_p = rows[self.pid_p2[:, 1]]
+            first_n, side_p, side_s = incidence(len(ids), i_p, j_p)
+            perm = self.rows(self.id_n)[ids]      # state row of each atoms row
+            self._inc = (i_p, j_p, first_n, side_p, side_s, perm)
+            self._inc_key = key
+        return self._inc
+
+    version_pairs = 0
+
+    def per_atom(self, name, atoms):
+        """A per-automaton state array reordered to the rows of ``atoms``."""
+        return getattr(self, name)[self.pair_rows(atoms)[5]]
+
+    # ------------------------------------------------------------------ contacts
+    def add_pairs(self, pos, ids, radius, i_new, j_new, S_new):
+        """Append unlinked contact pairs (rows i_new, j_new of the current Atoms)."""
+        if len(i_new) == 0:
+            return 0
+        a, b = ids[i_new], ids[j_new]
+        swap = a > b
+        ri = radius[i_new]
+        rj = radius[j_new]
+        pid = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
+        q0 = np.stack([np.where(swap, rj, ri), np.where(swap, ri, rj)], axis=1)
+        rows_i = np.where(swap, j_new, i_new)
+        rows_j = np.where(swap, i_new, j_new)
+        d = pos[rows_j] - pos[rows_i]
+        _min_image_np(d, self.box_c, self.periodic_c)
+        order = np.lexsort((pid[:, 1], pid[:, 0]))
+        m = len(order)
+        mats = self.mat_id_n[self.rows(self.id_n)[pid[order, 0]]], self.mat_id_n[self.rows(self.id_n)[pid[order, 1]]]
+        mu = np.array([mm.extra.get("mu", 0.3) for mm in self.materials])
+        sw = np.array([mm.extra.get("sigma_weld") or 0.0 for mm in self.materials])
+        nw = np.array([mm.extra.get("n_weld", 20) for mm in self.materials])
+        new = {
+            "pid_p2": pid[order], "linked_p": np.zeros(m, np.int8), "S_p": np.asarray(S_new)[order],
+            "q0_p2": q0[order], "r0_p": q0[order].sum(axis=1), "sig_p2": np.zeros((m, 2)),
+            "tau_p2c": np.zeros((m, 2, 3)), "dlast_pc": d[order], "D_p": np.zeros(m),
+            "count_p": np.zeros(m, np.int64), "sigc_p": np.zeros(m), "beta_p": np.ones(m),
+            "mu_p": 0.5 * (mu[mats[0]] + mu[mats[1]]),
+            "sigw_p": np.where((sw[mats[0]] > 0) & (sw[mats[1]] > 0), np.maximum(sw[mats[0]], sw[mats[1]]), 0.0),
+            "nweld_p": np.maximum(nw[mats[0]], nw[mats[1]]).astype(np.int64),
+            "sigd_p": np.zeros(m), "Dc_p": np.zeros(m), "epsd_p": np.zeros(m), "epsf_p": np.zeros(m),
+        }
+        # welded contacts take the weaker strength of the two materials
+        st = np.array([mm.sigma_t if mm.sigma_t else np.inf for mm in self.materials])
+        sc = np.array([mm.sigma_c if mm.sigma_c else np.inf for mm in self.materials])
+        t = np.minimum(st[mats[0]], st[mats[1]])
+        c = np.minimum(sc[mats[0]], sc[mats[1]])
+        fin = np.isfinite(t) & np.isfinite(c)
+        new["sigc_p"] = np.where(fin, c, 0.0)
+        new["beta_p"] = np.where(fin, c / np.where(fin, t, 1.0), 1.0)
+        for k in PAIR_ARRAYS:
+            setattr(self, k, np.ascontiguousarray(np.concatenate([getattr(self, k), new[k]])))
+        self.version_pairs += 1
+        self.version += 1
+        return m
+
+    # ------------------------------------------------------------------ checkpoint
+    def get_state(self):
+        d = {k: getattr(self, k).copy() for k in PAIR_ARRAYS + ATOM_ARRAYS}
+        d["step"] = int(self.step)
+        d["time"] = float(self.time)
+        d["version"] = int(self.version)
+        return d
+
+    def set_state(self, d):
+        for k in PAIR_ARRAYS + ATOM_ARRAYS:
+            setattr(self, k, np.ascontiguousarray(np.array(d[k])))
+        self.step = int(d["step"])
+        self.time = float(d["time"])
+        self.version = int(d.get("version", self.version)) + 1
+        self.version_pairs += 1
+        self._inc_key = None
+
+
+def _box(atoms):
+    from ..neighbors import check_cell
+    box, per = check_cell(atoms.cell.array, atoms.pbc)
+    return np.ascontiguousarray(box, dtype=np.float64), np.ascontiguousarray(per, dtype=np.bool_)
+
+
+def _min_image_np(d, box_c, periodic_c):
+    for a in range(3):
+        if periodic_c[a]:
+            d[:, a] -= box_c[a] * np.floor(d[:, a] / box_c[a] + 0.5)
