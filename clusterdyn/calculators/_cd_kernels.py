@@ -13,7 +13,12 @@ A run without damping never executes a damping instruction.
 
 Table layout (potentials.build_tables): ``coef[a, b, k, 0:4]`` cubic
 coefficients of the shifted pair energy in bin k; ``meta[a, b]`` =
-(r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2).
+(r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2, E(cutoff), r0_ab^2).
+
+``attraction="initial"`` (physics.md 1.5): with ``initial_only`` set, a pair
+not listed in ``bonds_nk`` (partner ids bonded at set-up, -1 padded, one row
+per particle) only repels: zero force beyond r0_ab and energy
+``E(r) - E(r0_ab)`` inside, so it stays conservative.
 """
 
 import numba
@@ -37,6 +42,17 @@ def _table(r, coef, meta, a, b):
     e = c0 + t * (c1 + t * (c2 + t * c3))
     de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
     return e, -de * meta[a, b, 1]
+
+
+@njit(inline="always")
+def _bonded(bonds_nk, i, jid):
+    for k in range(bonds_nk.shape[1]):
+        b = bonds_nk[i, k]
+        if b == jid:
+            return True
+        if b < 0:
+            return False
+    return False
 
 
 @njit(cache=True)
@@ -82,7 +98,7 @@ def _close(stat_k, k, r2n, i, j):
 
 @njit(cache=True, parallel=True)
 def cd_forces(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-              f_knc, stat_k, virial_k6):
+              f_knc, stat_k, initial_only, bonds_nk, id_n, virial_k6):
     """Conservative pair forces, total energy and virial.
 
     Parameters
@@ -94,7 +110,9 @@ def cd_forces(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds
     bounds_k : (K+1,) int64      chunk boundaries over particles
     f_knc : (K, N, 3) float64    out: per-chunk forces, eV/Angstrom
     stat_k : (K, 5) float64      out: [energy, min r^2/r0^2, i, j, n_close]
-    virial_k6 : (K, 6) float64   out: sum of 1/2... pair virial (xx yy zz yz xz xy), eV
+    initial_only : bool          attraction only between pairs bonded at set-up
+    bonds_nk, id_n : int64       set-up partner ids per particle, particle ids (empty if unused)
+    virial_k6 : (K, 6) float64   out: pair virial sum (xx yy zz yz xz xy), eV
     """
     nk = bounds_k.shape[0] - 1
     for k in prange(nk):
@@ -133,8 +151,15 @@ def cd_forces(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds
                 if r2 < meta[a, b, 3]:
                     nclose += 1
                     continue
+                free = False
+                if initial_only:
+                    free = not _bonded(bonds_nk, i, id_n[j])
+                    if free and r2 >= meta[a, b, 6]:
+                        continue
                 r = np.sqrt(r2)
                 e, fr = _table(r, coef, meta, a, b)
+                if free:
+                    e += meta[a, b, 5]
                 energy += e
                 s_ = fr / r
                 fx = s_ * dx
@@ -167,7 +192,7 @@ def cd_forces(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds
 
 @njit(cache=True, parallel=True)
 def cd_forces_per_particle(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-                           f_knc, stat_k, virial_k6, e_kn, w_kn6):
+                           f_knc, stat_k, initial_only, bonds_nk, id_n, virial_k6, e_kn, w_kn6):
     """:func:`cd_forces` plus per-particle energies ``e_kn`` (eV) and virials ``w_kn6`` (eV).
 
     Each pair gives half its energy and half its virial to each partner.
@@ -201,8 +226,15 @@ def cd_forces_per_particle(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef,
                 if r2 < meta[a, b, 3]:
                     nclose += 1
                     continue
+                free = False
+                if initial_only:
+                    free = not _bonded(bonds_nk, i, id_n[j])
+                    if free and r2 >= meta[a, b, 6]:
+                        continue
                 r = np.sqrt(r2)
                 e, fr = _table(r, coef, meta, a, b)
+                if free:
+                    e += meta[a, b, 5]
                 energy += e
                 e_n[i] += 0.5 * e
                 e_n[j] += 0.5 * e
@@ -245,7 +277,7 @@ def cd_forces_per_particle(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef,
 
 @njit(cache=True, parallel=True)
 def cd_forces_damped(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-                     f_knc, stat_k, p_nc, invm_n, eta_tt):
+                     f_knc, stat_k, initial_only, bonds_nk, id_n, p_nc, invm_n, eta_tt):
     """Conservative forces plus the pair damping of CD eq. (6).
 
     Damping on i from j: ``-eta_ab (v_i - v_j)`` with ``v = p/m`` and the
@@ -286,8 +318,15 @@ def cd_forces_damped(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta,
                 if r2 < meta[a, b, 3]:
                     nclose += 1
                     continue
+                free = False
+                if initial_only:
+                    free = not _bonded(bonds_nk, i, id_n[j])
+                    if free and r2 >= meta[a, b, 6]:
+                        continue
                 r = np.sqrt(r2)
                 e, fr = _table(r, coef, meta, a, b)
+                if free:
+                    e += meta[a, b, 5]
                 energy += e
                 s_ = fr / r
                 eta = eta_tt[a, b]

@@ -15,7 +15,42 @@ from ..parallel import use_threads
 from . import _cd_kernels as K
 
 #: arrays besides ASE's own whose change invalidates cached results
-STATE_ARRAYS = ("material",)
+STATE_ARRAYS = ("material", "bonds0", "id")
+#: values of the ``attraction`` parameter
+ATTRACTION = ("all", "initial")
+
+
+def mark_initial_bonds(atoms, rc=DEFAULT_RC):
+    """Record the pairs within ``rc * r0_ab`` now as the set-up bonds (``attraction="initial"``).
+
+    Writes ``atoms.arrays['bonds0']``: for every particle the stable ids
+    (``arrays['id']``) of its bonded partners, padded with -1.  Being a
+    per-particle array it follows slicing, sorting, H5MD and checkpoints.
+    """
+    calc = ClusterDynamics(rc=rc)
+    calc.setup(atoms)
+    n = len(atoms)
+    if "id" not in atoms.arrays:
+        atoms.new_array("id", np.arange(n, dtype=np.int64))
+    nl = NeighborList(calc.nl.cutoff, 0.0, half=False)
+    nl.build(atoms.positions, atoms.cell.array, atoms.pbc)
+    i, j, d, r = nl.pairs(atoms.positions)
+    types = calc._check_types(atoms)
+    cut = np.sqrt(calc.meta[types[i], types[j], 2])
+    keep = r < cut
+    i, j = i[keep], j[keep]
+    counts = np.bincount(i, minlength=n)
+    width = max(1, int(counts.max()) if n else 1)
+    bonds = np.full((n, width), -1, dtype=np.int64)
+    order = np.argsort(i, kind="stable")
+    i, j = i[order], j[order]
+    start = np.concatenate([[0], np.cumsum(counts)])
+    col = np.arange(len(i)) - start[i]
+    bonds[i, col] = atoms.arrays["id"][j]
+    if "bonds0" in atoms.arrays:
+        del atoms.arrays["bonds0"]
+    atoms.new_array("bonds0", bonds)
+    return bonds
 
 
 def default_skin(rc):
@@ -45,6 +80,11 @@ class ClusterDynamics(Calculator):
         Verlet skin as a multiple of the smallest r0 (default: :func:`default_skin`).
     n_table : int, default 2000
         Bins of the cubic-Hermite pair tables.
+    attraction : "all" or "initial"
+        ``"initial"``: attraction only between pairs bonded at set-up
+        (``atoms.arrays['bonds0']``, see :func:`mark_initial_bonds`); pairs that
+        come within the cutoff later only repel (physics.md 1.5 remedy for the
+        soft response at u ~ 2 km/s).
 
     Implemented properties: ``energy``, ``free_energy``, ``energies`` (eV),
     ``forces`` (eV/Angstrom), ``stress`` (Voigt, eV/Angstrom^3, needs a 3-D cell),
@@ -57,12 +97,14 @@ class ClusterDynamics(Calculator):
     implemented_properties = ["energy", "free_energy", "energies", "forces", "stress", "stresses",
                               "virials"]
     default_parameters = {"rc": DEFAULT_RC, "materials": None, "r0": None, "skin": None,
-                          "n_table": 2000}
+                          "n_table": 2000, "attraction": "all"}
     nolabel = True
 
     def __init__(self, **kwargs):
         Calculator.__init__(self, **kwargs)
         check_rc(self.parameters.rc)
+        if self.parameters.attraction not in ATTRACTION:
+            raise InputError("attraction", self.parameters.attraction, "'all' or 'initial'")
         self._setup_key = None
         self.nl = None
         self.potentials = None
@@ -164,8 +206,9 @@ class ClusterDynamics(Calculator):
         n = len(atoms)
         b = self._bufs(n, per_particle)
         bounds = K.chunk_bounds(nl.first_n, b["nk"])
+        initial, bonds, ids = self._bond_args(atoms)
         args = (wpos, types, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, bounds,
-                b["f_knc"], b["stat_k"])
+                b["f_knc"], b["stat_k"], initial, bonds, ids)
         if damping is not None:
             p_nc, invm_n, eta_tt = damping
             K.cd_forces_damped(*args, p_nc, invm_n, eta_tt)
@@ -191,6 +234,20 @@ class ClusterDynamics(Calculator):
                            "closest": (int(stat[k, 2]), int(stat[k, 3])), "npairs": nl.npairs,
                            "nbuilds": nl.nbuilds}
         return out
+
+    _NO_BONDS = np.zeros((0, 0), np.int64)
+    _NO_IDS = np.zeros(0, np.int64)
+
+    def _bond_args(self, atoms):
+        if self.parameters.attraction != "initial":
+            return False, self._NO_BONDS, self._NO_IDS
+        bonds = atoms.arrays.get("bonds0")
+        ids = atoms.arrays.get("id")
+        if bonds is None or ids is None:
+            raise InputError("atoms.arrays['bonds0']", None,
+                             "set-up bonds for attraction='initial': call "
+                             "clusterdyn.calculators.mark_initial_bonds(atoms) on the set-up configuration")
+        return True, np.ascontiguousarray(bonds, np.int64), np.ascontiguousarray(ids, np.int64)
 
     def _check_close(self, stat, types, step):
         nclose = stat[:, 4].sum()

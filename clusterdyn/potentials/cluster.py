@@ -212,8 +212,8 @@ def build_tables(potentials, n_bins=2000):
     Returns
     -------
     coef_ttbk : (nt, nt, n_bins, 4) float64
-    meta_ttm : (nt, nt, 5) float64
-        r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2 per pair type.
+    meta_ttm : (nt, nt, 7) float64
+        r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2, E(cutoff) (the shift), r0_ab^2 per pair type.
     tables : nested list of PairTable
     """
     nt = len(potentials)
@@ -223,10 +223,11 @@ def build_tables(potentials, n_bins=2000):
             law = potentials[a] if a == b else MixedPairPotential(potentials[a], potentials[b])
             tables[a][b] = tables[b][a] = PairTable(law, n_bins)
     coef = np.empty((nt, nt, n_bins, 4))
-    meta = np.empty((nt, nt, 5))
+    meta = np.empty((nt, nt, 7))
     for a in range(nt):
         for b in range(nt):
             t = tables[a][b]
             coef[a, b] = t.coef
-            meta[a, b] = (t.r_min, 1.0 / t.h, t.cutoff ** 2, t.r_min ** 2, 1.0 / t.law.r0 ** 2)
+            meta[a, b] = (t.r_min, 1.0 / t.h, t.cutoff ** 2, t.r_min ** 2, 1.0 / t.law.r0 ** 2, t.e_shift,
+                          t.law.r0 ** 2)
     return coef, meta, tables
