@@ -22,7 +22,7 @@ from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
 from ..parallel import use_threads
 from . import _integrate as I
-from .boundaries import Piston
+from .boundaries import Piston, RigidWall
 
 #: default time step as a fraction of r0/(c0 + u_max); see :func:`default_timestep`
 TIMESTEP_FACTOR = 0.03
@@ -247,6 +247,53 @@ class DampedVerlet(MolecularDynamics):
         return self.get_kinetic_energy() + self.potential_energy
 
     # -- checkpoint state ------------------------------------------------------------
+    def checkpoint(self, path, extra=None):
+        """Write the full state atomically (Atoms, dynamics, boundaries, calculator set-up).
+
+        ``extra`` is any nested dict of arrays/scalars the caller needs back
+        (scene parameters, analysis frames, RNG states).  Restore with
+        :meth:`DampedVerlet.restart`; N steps + restart + N steps equals 2N
+        steps bit for bit.
+        """
+        from ..io.checkpoint import write_checkpoint
+        state = {"dynamics": self.get_state(), "extra": extra or {}}
+        if isinstance(self.calc, ClusterDynamics):
+            state["calculator"] = {k: v for k, v in self.calc.parameters.items() if v is not None}
+        atoms = self.atoms.copy()
+        atoms.set_constraint()
+        write_checkpoint(path, atoms, state)
+        return path
+
+    @classmethod
+    def restart(cls, path, **kwargs):
+        """Rebuild (atoms, dynamics, extra) from :meth:`checkpoint`'s file."""
+        from ..io.checkpoint import read_checkpoint
+        atoms, state = read_checkpoint(path)
+        try:
+            dst = state["dynamics"]
+            cpar = dict(state.get("calculator", {}))
+        except (KeyError, TypeError):
+            raise InputError("checkpoint", str(path), "a checkpoint written by DampedVerlet.checkpoint") from None
+        for k in ("materials",):
+            if k in cpar:
+                cpar[k] = [str(m) for m in np.atleast_1d(cpar[k])]
+        if "r0" in cpar:
+            cpar["r0"] = [float(r) for r in np.atleast_1d(cpar["r0"])]
+        cons = []
+        for c in dst.get("constraints", []):
+            if c["kind"] == "RigidWall":
+                w = RigidWall(c["index"])
+            else:
+                w = Piston(c["index"], c["velocity"])
+            w.force = np.array(c["force"], dtype=float)
+            cons.append(w)
+        atoms.set_constraint(cons)
+        atoms.calc = ClusterDynamics(**cpar)
+        J = float(dst["J"])
+        dyn = cls(atoms, timestep=float(dst["dt"]), J=None if J < 0 else J, **kwargs)
+        dyn.set_state(dst)
+        return atoms, dyn, state.get("extra", {})
+
     def get_state(self):
         """Everything a bit-identical restart needs besides the Atoms."""
         nl = getattr(self.calc, "nl", None)
