@@ -145,6 +145,18 @@ class ShockTracker:
         self.lo, self.hi = lo, hi
         self.frames = []
 
+    def get_state(self):
+        """Everything needed to resume (for checkpoints)."""
+        return {"rho0": self.rho0, "u_piston": self.u_piston, "width": self.width, "axis": self.axis,
+                "lo": self.lo, "hi": self.hi, "frames": self.frames}
+
+    @classmethod
+    def from_state(cls, st):
+        t = cls(float(st["rho0"]), float(st["u_piston"]), float(st["width"]), int(st["axis"]),
+                None if st["lo"] is None else float(st["lo"]), None if st["hi"] is None else float(st["hi"]))
+        t.frames = [dict(f) for f in st["frames"]]
+        return t
+
     def add(self, time, atoms, virials, piston_x, exclude=None):
         prof = binned_profile(atoms, virials, self.axis, self.width, self.lo, self.hi, exclude)
         u_ax = prof["velocity"][:, self.axis]

@@ -20,23 +20,30 @@ def thermal_noise(atoms, rms, seed, exclude=None):
     atoms.set_velocities(atoms.get_velocities() + v)
 
 
-def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run"):
-    """Run ``nsteps`` steps, calling ``on_frame(dyn)`` at step 0 and every ``nsteps/nframes`` steps.
+def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkpoint=None,
+               checkpoint_every=0, get_extra=None):
+    """Run up to step ``nsteps``, calling ``on_frame(dyn)`` every ``nsteps/nframes`` steps.
 
-    Shows one tqdm bar over all steps (with time left) when ``progress``.
-    Returns the wall time of the stepping (without frame callbacks).
+    The frame at step 0 is taken unless the dynamics is resumed (``dyn.nsteps > 0``:
+    a restart continues after its last frame).  Every ``checkpoint_every``
+    frames (0 = never) the full state goes to ``checkpoint`` with
+    ``get_extra()`` (the caller's analysis state) beside it.  Shows one tqdm
+    bar over all steps with time left when ``progress``.  Returns the wall
+    time of the stepping alone.
     """
     every = max(1, int(round(nsteps / max(1, nframes))))
     bar = None
+    done = dyn.nsteps
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=nsteps, desc=desc, unit="step", leave=False, dynamic_ncols=True)
-    on_frame(dyn)
-    done = 0
+        bar = tqdm(total=nsteps, initial=done, desc=desc, unit="step", leave=False, dynamic_ncols=True)
+    if done == 0:
+        on_frame(dyn)
     t_run = 0.0
+    nframe = done // every
     try:
         while done < nsteps:
-            k = min(every, nsteps - done)
+            k = min(every - done % every, nsteps - done)
             t0 = time.perf_counter()
             dyn.run(k)
             t_run += time.perf_counter() - t0
@@ -44,6 +51,9 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run"):
             if bar is not None:
                 bar.update(k)
             on_frame(dyn)
+            nframe += 1
+            if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
+                dyn.checkpoint(checkpoint, extra=get_extra() if get_extra else None)
     finally:
         if bar is not None:
             bar.close()

@@ -44,6 +44,7 @@ PARAMS = [
     Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
     Param("h5md", True, "write an H5MD trajectory (with --out)", kind="bool"),
     Param("h5md_frames", 20, "trajectory frames written to the H5MD file", kind="int", low=1),
+    Param("checkpoint_every", 10, "frames between checkpoints (with --out; 0 = none)", kind="int", low=0),
 ]
 
 
@@ -94,12 +95,18 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u)
 
 
-def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock"):
-    """Run a built shock, tracking the front; returns (ShockTracker, ShockState, stepping wall time)."""
+def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", checkpoint=None,
+              checkpoint_every=0, tracker=None, params=None):
+    """Run a built shock, tracking the front; returns (ShockTracker, ShockState, stepping wall time).
+
+    With ``checkpoint`` the state (and the tracker's frames) is saved every
+    ``checkpoint_every`` frames; pass the restored ``tracker`` to resume.
+    """
     atoms, calc = setup.atoms, setup.calc
-    x0 = atoms.positions[:, 0].min()
-    tracker = ShockTracker(setup.material.rho0, setup.u, setup.slab, axis=0, lo=x0,
-                           hi=x0 + setup.length + setup.slab)
+    if tracker is None:
+        x0 = atoms.positions[~setup.piston_mask, 0].min()
+        tracker = ShockTracker(setup.material.rho0, setup.u, setup.slab, axis=0, lo=x0,
+                               hi=x0 + setup.length + setup.slab)
 
     def frame(dyn):
         out = calc.compute(atoms, per_particle=True)
@@ -108,8 +115,30 @@ def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock"):
         if on_frame is not None:
             on_frame(dyn)
 
-    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc)
+    def extra():
+        return {"tracker": tracker.get_state(), "params": params or {}, "nsteps_total": setup.nsteps,
+                "slab": setup.slab, "length": setup.length}
+
+    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc,
+                       checkpoint=checkpoint, checkpoint_every=checkpoint_every, get_extra=extra)
     return tracker, tracker.result(), t_run
+
+
+def restore_shock(path):
+    """Rebuild a ShockSetup and its tracker from a shock checkpoint."""
+    atoms, dyn, extra = DampedVerlet.restart(path)
+    try:
+        p = extra["params"]
+        tracker = ShockTracker.from_state(extra["tracker"])
+    except (KeyError, TypeError):
+        raise InputError("--restart", str(path), "a checkpoint written by the shock scene") from None
+    piston = atoms.constraints[0]
+    mask = np.zeros(len(atoms), bool)
+    mask[piston.index] = True
+    setup = ShockSetup(atoms, atoms.calc, dyn, piston, mask, int(extra["nsteps_total"]),
+                       float(extra["slab"]), float(extra["length"]), get_material(p["material"]),
+                       float(np.linalg.norm(piston.velocity)))
+    return setup, tracker, p
 
 
 def plot_shock(tracker, state, path, title=""):
@@ -177,10 +206,15 @@ def shock_quantities(state, mat, u):
 
 @register("shock", "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot",
           PARAMS)
-def shock_scene(v, out=None, progress=True):
+def shock_scene(v, out=None, progress=True, restart=None):
     t0 = time.perf_counter()
-    setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
-                        v["noise"], v["seed"], v["dt_factor"])
+    tracker = None
+    if restart is not None:
+        setup, tracker, stored = restore_shock(restart)
+        v = {**v, **{k: (tuple(x) if isinstance(x, list) else x) for k, x in stored.items()}}
+    else:
+        setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
+                            v["noise"], v["seed"], v["dt_factor"])
     writer = None
     files = []
     if out is not None and v["h5md"]:
@@ -191,11 +225,18 @@ def shock_scene(v, out=None, progress=True):
         if H5MDWriter is not None:
             out.mkdir(parents=True, exist_ok=True)
             path = out / "shock.h5md"
-            writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v)
+            if restart is not None and path.exists():
+                writer = H5MDWriter(str(path), setup.atoms, mode="a", dyn=setup.dyn, parameters=v,
+                                    restart_step=setup.dyn.nsteps)
+            else:
+                writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v)
             setup.dyn.attach(writer, interval=max(1, setup.nsteps // v["h5md_frames"]))
             files.append(path)
     try:
-        tracker, state, t_run = run_shock(setup, v["frames"], progress)
+        ckpt = (out / "checkpoint.h5") if (out is not None and v["checkpoint_every"]) else None
+        tracker, state, t_run = run_shock(setup, v["frames"], progress, checkpoint=ckpt,
+                                          checkpoint_every=v["checkpoint_every"], tracker=tracker,
+                                          params=v)
     finally:
         if writer is not None:
             writer.close()
