@@ -119,11 +119,14 @@ class MCADynamics(MolecularDynamics):
     """
 
     def __init__(self, atoms, timestep=None, *, damping=0.0, grips=(), contact_every=10,
-                 check_timestep=True, trajectory=None, logfile=None, loginterval=1, **kw):
+                 check_timestep=True, state=None, trajectory=None, logfile=None, loginterval=1, **kw):
         calc = atoms.calc
         from .calculator import MCA
         if not isinstance(calc, MCA):
             raise InputError("atoms.calc", type(calc).__name__, "an MCA calculator")
+        if state is not None:          # restart: the pair table comes from the checkpoint
+            from .state import MCAState
+            calc.state = MCAState.from_dict(atoms, state, calc.materials, calc.interfaces, calc.dim)
         self.state = calc.setup(atoms)
         st = self.state
         dt_def = default_timestep(atoms, st.materials)
@@ -154,6 +157,8 @@ class MCADynamics(MolecularDynamics):
         self._F = None
         self._setup_masses()
         self._evaluate(commit=False)
+        if state is not None:
+            self._restore_counters(state)
 
     # ------------------------------------------------------------------ helpers
     def _setup_masses(self):
@@ -392,19 +397,31 @@ class MCADynamics(MolecularDynamics):
         d["dissipated"] = float(self.dissipated)
         d["nsteps"] = int(self.nsteps)
         d["grip_displacement"] = np.array([g.displacement for g in self.grips])
+        d["forces"] = self._F.copy()       # the forces of the next half kick, exactly
+        d["torques"] = self._T.copy()
         return d
 
     def set_state(self, d):
-        """Restore :meth:`get_state`; the Atoms (positions, momenta, theta, omega) come separately."""
+        """Restore :meth:`get_state`; the Atoms (positions, momenta, theta, omega) come separately.
+
+        (Or pass ``state=d`` to the constructor: then no tessellation of the
+        deformed sample is made at all.)
+        """
         self.state.set_state(d)
+        self._nl = None
+        self._setup_masses()
+        self._evaluate(commit=False)
+        self._restore_counters(d)
+
+    def _restore_counters(self, d):
         self.stored_work = float(d.get("stored_work", 0.0))
         self.dissipated = float(d.get("dissipated", 0.0))
         self.nsteps = int(d.get("nsteps", self.state.step))
         for g, x in zip(self.grips, np.atleast_1d(d.get("grip_displacement", []))):
             g.displacement = float(x)
-        self._nl = None
-        self._setup_masses()
-        self._evaluate(commit=False)
+        if "forces" in d:
+            self._F = np.array(d["forces"], dtype=float)
+            self._T = np.array(d["torques"], dtype=float)
 
 
 def out_f_trial(out, F1):

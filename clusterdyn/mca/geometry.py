@@ -83,6 +83,12 @@ def tessellate(positions, radius, cell, pbc, dim=3):
         raise InputError("atoms", f"{n} automata", f"at least {dim + 2} automata for a tessellation")
     pbc = np.asarray(pbc, bool).reshape(3)
     cell = np.asarray(cell, float).reshape(3, 3)
+    dmax = 2.0 * float(np.max(radius))
+    for a in range(dim):
+        if pbc[a] and cell[a, a] < 3.0 * dmax - 1e-9:
+            raise InputError("cell", cell.diagonal().tolist(),
+                             f"periodic lengths of at least 3 automaton sizes ({3 * dmax:.4g} A) along "
+                             f"{'xyz'[a]}: pairs are found by minimum image")
     lo, hi = sample_planes(np.asarray(positions, float), np.asarray(radius, float), cell, pbc, dim)
     width = 3.0 * float(np.max(radius)) * 2.0
     # ghost shell: kind 0 real, 1 periodic image (owner = original row), 2 mirror

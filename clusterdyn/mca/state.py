@@ -129,16 +129,62 @@ class MCAState:
         self._inc_key = None
 
     # ------------------------------------------------------------------ set-up
+    @classmethod
+    def from_dict(cls, atoms, d, materials=None, interfaces=None, dim=None):
+        """A state restored from :meth:`get_state` (no tessellation: the pair table is in ``d``)."""
+        self = cls.__new__(cls)
+        self.dim = detect_dim(atoms, dim)
+        self.materials = mca_materials_of(atoms, materials)
+        self.interfaces = dict(interfaces or {})
+        self.version = 0
+        self.box_c, self.periodic_c = _box(atoms)
+        self._inc_key = None
+        self.set_state(d)
+        self.vcell_n = np.zeros(len(self.id_n))
+        ids = np.asarray(atoms.arrays["id"], np.int64)
+        mid = np.asarray(atoms.arrays["material"], np.int64)
+        self.mat_id_n = mid[self.rows(ids)[self.id_n]]
+        self._material_constants()
+        self._flags()
+        return self
+
+    def _material_constants(self):
+        mats = self.materials
+        self.G_m = np.array([m.G for m in mats])
+        self.K_m = np.array([m.K for m in mats])
+        self.rho_m = np.array([m.rho0 for m in mats])
+        self.responses = [m.response or "elastic" for m in mats]
+        resp = self.responses
+        self.plastic_m = np.array([r in ("elastic-plastic", "plastic-degrading") for r in resp], np.int8)
+        tabs = [hardening_table(m) if p else (np.array([0.0, 1.0]), np.array([np.inf, np.inf]))
+                for m, p in zip(mats, self.plastic_m)]
+        k = max(len(t[0]) for t in tabs)
+        self.tab_e = np.zeros((len(mats), k))
+        self.tab_s = np.zeros((len(mats), k))
+        for q, (e, s) in enumerate(tabs):
+            # pad by repeating the last point far out
+            self.tab_e[q] = np.concatenate([e, e[-1] + 1.0 + np.arange(k - len(e))])
+            self.tab_s[q] = np.concatenate([s, np.full(k - len(e), s[-1])])
+
+    def _flags(self):
+        """Kernel selection: a term the sample does not use is never run."""
+        resp = self.responses
+        self.flags = {
+            "fracture": bool(np.any(self.sigc_p > 0)) and not any(r == "degrading" for r in resp),
+            "degrading": any(r == "degrading" for r in resp),
+            "plastic": bool(self.plastic_m.any()),
+            "plastic_degrading": any(r == "plastic-degrading" for r in resp),
+            "healing": bool(np.any(self.sigw_p > 0)),
+        }
+        self.flags["contacts"] = (self.flags["fracture"] or self.flags["degrading"]
+                                  or self.flags["plastic_degrading"] or bool(np.any(self.linked_p == 0)))
+
     def _material_setup(self, atoms, ii, jj):
         mats = self.materials
         mid = np.asarray(atoms.arrays["material"], np.int64)
         self.mat_id_n = mid.copy()
-        G = np.array([m.G for m in mats])
-        K = np.array([m.K for m in mats])
-        self.G_m, self.K_m = G, K
-        self.rho_m = np.array([m.rho0 for m in mats])
-        resp = [m.response or "elastic" for m in mats]
-        self.responses = resp
+        self._material_constants()
+        resp = self.responses
         npair = len(ii)
         mi, mj = mid[ii], mid[jj]
 
@@ -181,27 +227,7 @@ class MCAState:
                        for m, r in zip(mats, resp)])
         self.epsd_p = np.minimum(ed[mi], ed[mj])
         self.epsf_p = np.maximum(ef[mi], ef[mj]) * ((ef[mi] > 0) | (ef[mj] > 0))
-        # plasticity tables
-        self.plastic_m = np.array([r in ("elastic-plastic", "plastic-degrading") for r in resp], np.int8)
-        tabs = [hardening_table(m) if p else (np.array([0.0, 1.0]), np.array([np.inf, np.inf]))
-                for m, p in zip(mats, self.plastic_m)]
-        k = max(len(t[0]) for t in tabs)
-        self.tab_e = np.zeros((len(mats), k))
-        self.tab_s = np.zeros((len(mats), k))
-        for q, (e, s) in enumerate(tabs):
-            # pad by repeating the last point far out
-            self.tab_e[q] = np.concatenate([e, e[-1] + 1.0 + np.arange(k - len(e))])
-            self.tab_s[q] = np.concatenate([s, np.full(k - len(e), s[-1])])
-        # kernel selection (a term a sample does not use is never run)
-        self.flags = {
-            "fracture": bool(np.any(self.sigc_p > 0)) and not any(r == "degrading" for r in resp),
-            "degrading": any(r == "degrading" for r in resp),
-            "plastic": bool(self.plastic_m.any()),
-            "plastic_degrading": any(r == "plastic-degrading" for r in resp),
-            "healing": bool(np.any(self.sigw_p > 0)),
-        }
-        self.flags["contacts"] = (self.flags["fracture"] or self.flags["degrading"]
-                                  or self.flags["plastic_degrading"])
+        self._flags()
 
     def unlink_across(self, pos, ii, jj, point, normal, extent=None, **_):
         """Unlink the pairs whose segment crosses the plane (point, normal) within ``extent``.
