@@ -68,6 +68,13 @@ class ClusterDynamics(Calculator):
     builders).  A pair interacts while ``r < rc * r0_ab``; the energy is
     shifted by ``E(rc)`` so it stays continuous when pairs cross the cutoff.
 
+    Implemented properties: ``energy``, ``free_energy``, ``energies`` (eV),
+    ``forces`` (eV/Angstrom), ``stress`` (Voigt, eV/Angstrom^3, needs a 3-D cell),
+    ``stresses`` (per-particle virial divided by the cell volume, ASE's
+    convention: they sum to ``stress``; potential part only), ``virials``
+    (per-particle virial W^a of CD eq. 3 without the kinetic part, Voigt, eV).
+    Per-particle quantities are computed only when asked for.
+
     Parameters
     ----------
     rc : float, default 1.15
@@ -86,12 +93,6 @@ class ClusterDynamics(Calculator):
         come within the cutoff later only repel (physics.md 1.5 remedy for the
         soft response at u ~ 2 km/s).
 
-    Implemented properties: ``energy``, ``free_energy``, ``energies`` (eV),
-    ``forces`` (eV/Angstrom), ``stress`` (Voigt, eV/Angstrom^3, needs a 3-D cell),
-    ``stresses`` (per-particle virial divided by the cell volume, ASE's
-    convention: they sum to ``stress``; potential part only), ``virials``
-    (per-particle virial W^a of CD eq. 3 without the kinetic part, Voigt, eV).
-    Per-particle quantities are computed only when asked for.
     """
 
     implemented_properties = ["energy", "free_energy", "energies", "forces", "stress", "stresses",
