@@ -1,7 +1,8 @@
 """Binned profiles over a whole trajectory, as arrays ready to plot or write.
 
 :func:`trajectory_profiles` runs :func:`clusterdyn.analysis.stress.stress_profile`
-on every frame with one fixed set of slabs, and stacks the results:
+on every frame with one fixed set of slabs (:class:`ProfileRecorder`, also usable
+as an observer during a run), and stacks the results:
 ``stress[f, b, c]`` is component c (Voigt xx yy zz yz xz xy, lab frame) of
 slab b in frame f.  :func:`write_profiles_csv` writes one frame (or several)
 as CSV in GPa, um, m/s and g/cm3.
@@ -41,6 +42,48 @@ def _frame_virials(atoms, virials, calc):
                      "calculator `calc`, or a function atoms -> (N, 6) virials")
 
 
+class ProfileRecorder:
+    """Collect slab profiles frame by frame on one fixed set of slabs.
+
+    ``add(atoms, virials, time)`` profiles one frame
+    (:func:`~clusterdyn.analysis.stress.stress_profile`); :meth:`arrays`
+    stacks them into the dict :func:`trajectory_profiles` returns.  Use it
+    from a dynamics observer when the run is not stored.
+    """
+
+    KEYS = ("stress", "von_mises", "pressure", "density", "velocity", "count")
+
+    def __init__(self, width, axis=0, lo=None, hi=None):
+        self.width, self.axis, self.lo, self.hi = width, axis, lo, hi
+        self.edges = None
+        self.frames = {k: [] for k in self.KEYS}
+        self.t = []
+
+    def add(self, atoms, virials, time, exclude=None):
+        if self.edges is None:
+            x = atoms.positions[:, self.axis]
+            span = x.max() - x.min()
+            a = x.min() - 0.2 * span if self.lo is None else self.lo
+            b = x.max() + 0.2 * span if self.hi is None else self.hi
+            nb = max(1, int(np.ceil((b - a) / self.width)))
+            self.edges = a + self.width * np.arange(nb + 1)
+        p = stress_profile(atoms, self.width, virials, axis=self.axis, lo=self.edges[0],
+                           hi=self.edges[-1], exclude=exclude)
+        for k in self.KEYS:
+            self.frames[k].append(p[k])
+        self.t.append(float(time))
+        return p
+
+    def arrays(self):
+        if self.edges is None:
+            raise InputError("trajectory", "no frames", "at least one frame")
+        res = {k: np.array(v) for k, v in self.frames.items()}
+        res["t"] = np.asarray(self.t, float)
+        res["edges"] = self.edges
+        res["x"] = 0.5 * (self.edges[1:] + self.edges[:-1])
+        return res
+
+
 def trajectory_profiles(trajectory, width, axis=0, lo=None, hi=None, virials=None, calc=None,
                         times=None, exclude=None):
     """Stress, intensity, density and velocity profiles for every frame of a trajectory.
@@ -72,31 +115,12 @@ def trajectory_profiles(trajectory, width, axis=0, lo=None, hi=None, virials=Non
         eV/A^3, ``von_mises`` (nf, nb), ``pressure`` (nf, nb), ``density``
         (nf, nb) amu/A^3, ``velocity`` (nf, nb, 3) A/time, ``count`` (nf, nb).
     """
-    keys = ("stress", "von_mises", "pressure", "density", "velocity", "count")
-    out = {k: [] for k in keys}
-    t = []
-    edges = None
+    rec = ProfileRecorder(width, axis, lo, hi)
     for i, atoms in enumerate(_frames(trajectory)):
-        if edges is None:
-            x = atoms.positions[:, axis]
-            span = x.max() - x.min()
-            a = x.min() - 0.2 * span if lo is None else lo
-            b = x.max() + 0.2 * span if hi is None else hi
-            nb = max(1, int(np.ceil((b - a) / width)))
-            edges = a + width * np.arange(nb + 1)
-        W = _frame_virials(atoms, virials, calc)
         ex = exclude(atoms) if callable(exclude) else exclude
-        p = stress_profile(atoms, width, W, axis=axis, lo=edges[0], hi=edges[-1], exclude=ex)
-        for k in keys:
-            out[k].append(p[k])
-        t.append(times[i] if times is not None else atoms.info.get("time", float(i)))
-    if edges is None:
-        raise InputError("trajectory", trajectory, "at least one frame")
-    res = {k: np.array(v) for k, v in out.items()}
-    res["t"] = np.asarray(t, float)
-    res["edges"] = edges
-    res["x"] = 0.5 * (edges[1:] + edges[:-1])
-    return res
+        t = times[i] if times is not None else atoms.info.get("time", float(i))
+        rec.add(atoms, _frame_virials(atoms, virials, calc), t, exclude=ex)
+    return rec.arrays()
 
 
 def write_profiles_csv(path, profiles, frames=None):

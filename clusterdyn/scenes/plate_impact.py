@@ -1,0 +1,626 @@
+"""Scenes ``plate-impact`` and ``polycrystal-shock`` (physics.md 1.4, 1.7).
+
+``plate-impact``: two aluminium plates, free along x and periodic across,
+collide at a relative speed ``v`` (each moves at v/2 toward the other, the
+centre-of-mass frame).  The sample is a [100] single crystal, a polycrystal
+(:func:`clusterdyn.build.polycrystal`, relaxed before the impact) or both.
+Recorded: slab profiles of sigma_xx, sigma_yy, sigma_zz and the von Mises
+intensity (CD eq. 3-4) at chosen times, the x-t history of the intensity, and
+the free-surface velocity of the rear face of the target (the VISAR trace,
+in the target's rest frame).  Measured: the intensity at the front and its
+plateau behind it, -sigma_xx behind the front (against rho0 D u of the
+Al-1100 Hugoniot at u = v/2), the speeds of the elastic precursor and of
+the main wave (in the target's frame), the free-surface plateau (against
+v) and the pullback after it.
+
+``polycrystal-shock``: a piston shock (DampedVerlet + Piston, the shock
+scene's tracker) in a relaxed polycrystal of a chosen porosity; D, u, P and
+the same run on a [100] single crystal beside the experimental Hugoniot.
+
+Relaxation of a polycrystal (:func:`relax_sample`): grain-boundary clusters
+left at ``d_min`` repel strongly, so the sample is quenched first: cycles of
+damped dynamics (J = 2) after which all velocities are zeroed and the
+periodic cross-section is rescaled toward zero lateral stress.
+"""
+
+import csv
+import math
+import time
+
+import numpy as np
+
+from .. import units
+from ..analysis.profiles import ProfileRecorder, write_profiles_csv
+from ..analysis.stress import particle_virials
+from ..build import Plate, fcc_packing, polycrystal, polycrystal_summary
+from ..build.lattice import SQRT2
+from ..calculators import ClusterDynamics
+from ..errors import InputError
+from ..materials import get_material, hugoniot
+from ..md import DampedVerlet
+from ..md.damped import TIMESTEP_FACTOR
+from .base import Param, Quantity, SceneResult, register
+from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
+from .shock import ShockSetup, run_shock, shock_quantities
+
+#: gap between the plates' surfaces at the start, in r0 (just beyond the cutoff)
+GAP = 1.25
+#: damping of the quench relaxation (Gamma = c0/(J r0))
+RELAX_J = 2.0
+
+
+# --------------------------------------------------------------------------- samples
+def _concat(parts):
+    from ..build import make_cluster_atoms
+    pos = np.vstack([p.positions for p in parts])
+    atoms = make_cluster_atoms(pos, parts[0].info["cd_materials"], parts[0].info["cd_r0"])
+    grain = [p.arrays.get("grain", np.full(len(p), -1)) for p in parts]
+    off = 0
+    gs = []
+    for g in grain:
+        gs.append(np.where(g >= 0, g + off, -1))
+        off += max(0, int(g.max()) + 1)
+    atoms.new_array("grain", np.concatenate(gs).astype(np.int64))
+    atoms.new_array("plate", np.concatenate([np.full(len(p), k, np.int64) for k, p in enumerate(parts)]))
+    return atoms
+
+
+def make_plate(sample, material, r0, thickness, width, grain_size=8.0, seed=1, d_min=0.85,
+               porosity=None):
+    """One plate (x from 0 to ``thickness``), periodic across with ``width`` (Angstrom).
+
+    ``sample``: "single" ([100] fcc, width rounded to whole repeat cells by the
+    caller) or "polycrystal" (grains of mean diameter ``grain_size`` r0).
+    """
+    if sample == "single":
+        shape = Plate(thickness, width, axis=0)
+        return fcc_packing(material, r0, direction="100", shape=shape, pbc=(False, True, True))
+    if sample == "polycrystal":
+        return polycrystal(material, r0, Plate(thickness, width, axis=0), grain_size=grain_size * r0,
+                           seed=seed, pbc=(False, True, True), d_min=d_min, target_porosity=porosity)
+    raise InputError("sample", sample, "single or polycrystal")
+
+
+def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False):
+    """Quench a sample (in place): damped dynamics, velocities zeroed every ``steps``.
+
+    With ``lateral`` the periodic cross-section (y, z) is rescaled after each
+    cycle by ``1 - s_yy/(1.5 K0)`` (``s_zz`` for z), which drives the mean
+    lateral stress of a plate toward zero.  Returns a dict with the final
+    mean stress (Voigt, eV/A^3), the smallest pair distance (r0) and the
+    number of steps.
+    """
+    calc = atoms.calc
+    calc.setup(atoms)
+    pot = calc.potentials[0]
+    K0 = pot.material.curve.K0
+    dyn = DampedVerlet(atoms, J=RELAX_J)
+    s = np.zeros(6)
+    for _ in range(cycles):
+        dyn.run(steps)
+        atoms.set_momenta(np.zeros((len(atoms), 3)))
+        x = atoms.positions[:, 0]
+        vol = (np.ptp(x) + pot.r0 / SQRT2) * atoms.cell[1, 1] * atoms.cell[2, 2]
+        s = particle_virials(atoms).sum(axis=0) / vol
+        if lateral:
+            f = np.ones(3)
+            f[1] = 1.0 - s[1] / (1.5 * K0)       # tension (s > 0): shrink the cross-section
+            f[2] = 1.0 - s[2] / (1.5 * K0)
+            atoms.set_cell(atoms.cell.array * f[:, None], scale_atoms=True)
+        dyn.forces = None                     # positions or momenta changed outside the step
+    return {"stress": s, "min_r_over_r0": calc.last_stats["min_r_over_r0"], "steps": cycles * steps}
+
+
+def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * units.um, flyer=25.0,
+                 target=50.0, width=16.0, grain_size=8.0, d_min=0.85, porosity=None, seed=1,
+                 noise=10 * units.m_s, J=50.0, dt_factor=TIMESTEP_FACTOR, relax_cycles=12):
+    """Two plates ready to collide; returns a dict with atoms, dynamics and bookkeeping.
+
+    Lengths ``flyer``, ``target``, ``width`` are in r0.  The width is rounded
+    to whole [100] repeat cells (sqrt 2 r0) so both samples have the same cross-section.
+    """
+    mat = get_material(material)
+    if mat.curve is None:
+        raise InputError("material", material, "a material with a cold curve (CD)")
+    a = SQRT2 * r0
+    W = max(2, int(round(width / SQRT2))) * a
+    if sample == "polycrystal" and grain_size * r0 > min(flyer, target) * r0 * 2:
+        raise InputError("grain_size", grain_size, f"at most twice the thinner plate ({min(flyer, target):g} r0)")
+    pf = make_plate(sample, mat, r0, flyer * r0, W, grain_size, seed, d_min, porosity)
+    pt = make_plate(sample, mat, r0, target * r0, W, grain_size, seed + 1, d_min, porosity)
+    reports = [p.info.get("polycrystal") for p in (pf, pt)]
+    # relax both plates in one periodic cell, far apart
+    pt.positions += np.array([flyer * r0 + 10 * r0, 0, 0])
+    atoms = _concat([pf, pt])
+    Lx = (flyer + target + 30) * r0
+    atoms.set_cell([Lx, W, W])
+    atoms.pbc = (False, True, True)
+    calc = ClusterDynamics()
+    atoms.calc = calc
+    relax = None
+    if sample == "polycrystal" and relax_cycles:
+        relax = relax_sample(atoms, cycles=relax_cycles)
+    plate = atoms.arrays["plate"]
+    fl, tg = plate == 0, plate == 1
+    shift = atoms.positions[fl, 0].max() + GAP * r0 - atoms.positions[tg, 0].min()
+    atoms.positions[tg, 0] += shift
+    atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 5 * r0
+    calc.setup(atoms)
+    pot = calc.potentials[0]
+    vel = np.zeros((len(atoms), 3))
+    vel[fl, 0] = 0.5 * v
+    vel[tg, 0] = -0.5 * v
+    atoms.set_velocities(vel)
+    thermal_noise(atoms, noise, seed)
+    dt = dt_factor * r0 / (pot.c0 + v)
+    dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    x_rear = atoms.positions[tg, 0].max()
+    rear = tg & (atoms.positions[:, 0] > x_rear - 1.5 * r0)
+    x_impact = 0.5 * (atoms.positions[fl, 0].max() + atoms.positions[tg, 0].min())
+    return {"atoms": atoms, "calc": calc, "dyn": dyn, "material": mat, "r0": r0, "v": v, "dt": dt,
+            "rear": rear, "x_impact": x_impact, "x_rear": x_rear, "flyer": flyer * r0,
+            "target": target * r0, "width": W, "reports": reports, "relax": relax, "sample": sample,
+            "c0": pot.c0}
+
+
+# --------------------------------------------------------------------------- run + analysis
+def run_impact(setup, duration=None, frames=60, fsv_every=5, progress=True):
+    """Run an impact; record slab profiles (``frames``) and the rear free-surface velocity."""
+    atoms, calc, dyn = setup["atoms"], setup["calc"], setup["dyn"]
+    r0, v = setup["r0"], setup["v"]
+    cL = math.sqrt(1.5) * setup["c0"]             # [100] longitudinal speed of the lattice
+    if duration is None:                          # waves in a porous polycrystal are slower
+        slow = 1.0 if setup["sample"] == "single" else 1.6
+        duration = slow * (setup["target"] + 3.0 * setup["flyer"]) / cL
+    nsteps = int(math.ceil(duration / setup["dt"]))
+    rec = ProfileRecorder(2.0 * r0, axis=0, lo=atoms.positions[:, 0].min() - 10 * r0,
+                          hi=atoms.positions[:, 0].max() + 10 * r0)
+    rear = setup["rear"]
+    m_rear = atoms.get_masses()[rear]
+    fsv_t, fsv_v = [], []
+
+    def fsv():
+        u = (m_rear * atoms.get_velocities()[rear, 0]).sum() / m_rear.sum()
+        fsv_t.append(dyn.get_time())
+        fsv_v.append(u + 0.5 * v)                 # target rest frame
+
+    dyn.attach(fsv, interval=fsv_every)
+
+    def frame(d):
+        out = calc.compute(atoms, per_particle=True)
+        rec.add(atoms, out["virials"], d.get_time())
+
+    t_run = run_frames(dyn, nsteps, frames, frame, progress=progress, desc=f"plate impact ({setup['sample']})")
+    dyn.observers.clear()
+    return {"profiles": rec.arrays(), "fsv_t": np.array(fsv_t), "fsv_v": np.array(fsv_v),
+            "nsteps": nsteps, "t_run": t_run}
+
+
+def _fronts(prof, x_impact, x_rear, p_threshold_main=0.5, floor=0.15 * units.GPa):
+    """Per frame: -sigma_xx plateau in the target, main-front and precursor positions.
+
+    Main front: the furthest slab where -sigma_xx reaches half the plateau
+    (90th percentile over the target).  Precursor: the furthest slab above
+    ``max(floor, 4% of the plateau, 3 x the scatter of -sigma_xx in the target
+    before the impact)``, so residual stresses of a polycrystal are not taken
+    for a wave.
+    """
+    x = prof["x"]
+    nf = len(prof["t"])
+    main, pre, plateau = np.full(nf, np.nan), np.full(nf, np.nan), np.full(nf, np.nan)
+    w = x[1] - x[0]
+    in_target = (x > x_impact) & (x < x_rear + 5.0 * w)
+    ok0 = in_target & (prof["count"][0] > 0)
+    if ok0.sum() > 3:
+        floor = max(floor, 3.0 * float(np.std(prof["stress"][0, ok0, 0])))
+    for f in range(nf):
+        p = -prof["stress"][f, :, 0]
+        sel = in_target & (prof["count"][f] > 0)
+        if sel.sum() < 4:
+            continue
+        pt = p[sel]
+        xs = x[sel]
+        peak = np.percentile(pt, 90)
+        if peak < 2 * floor:
+            continue
+        plateau[f] = peak
+        above = np.nonzero(pt >= p_threshold_main * peak)[0]
+        main[f] = xs[above.max()]
+        above = np.nonzero(pt >= max(floor, 0.04 * peak))[0]
+        pre[f] = xs[above.max()]
+    return main, pre, plateau
+
+
+def _speed(t, x, lo, hi):
+    """Slope of x(t) over the frames with lo < x < hi, up to the first frame that reaches hi
+    or the furthest position (the wave has reflected after it)."""
+    ok = np.isfinite(x) & (x > lo) & (x < hi)
+    if not np.isfinite(x).any():
+        return np.nan
+    stop = int(np.nanargmax(x))
+    reached = np.nonzero(np.isfinite(x) & (x >= hi))[0]
+    if len(reached):
+        stop = min(stop, int(reached[0]))
+    ok[stop + 1:] = False
+    if ok.sum() < 3:
+        return np.nan
+    return float(np.polyfit(t[ok], x[ok], 1)[0])
+
+
+def analyse_impact(setup, run):
+    """Plateaus, front and precursor speeds, intensity, free-surface plateau and pullback (ASE units)."""
+    prof = run["profiles"]
+    r0, v = setup["r0"], setup["v"]
+    xi, xr = setup["x_impact"], setup["x_rear"]
+    w = prof["x"][1] - prof["x"][0]
+    main, pre, plateau = _fronts(prof, xi, xr)
+    t = prof["t"]
+    # fit while the fronts run through the middle of the target (its own frame moves at -v/2)
+    lo, hi = xi + 0.15 * (xr - xi), xr - 3 * w
+    D_main = _speed(t, main, lo, hi) + 0.5 * v
+    D_pre = _speed(t, pre, lo, hi) + 0.5 * v
+    # state behind the main front: the frame where it first passes 75% of the target
+    x = prof["x"]
+    target_pos = xi + 0.75 * (xr - xi)
+    reached = np.nonzero(np.isfinite(main) & (main >= target_pos))[0]
+    if len(reached):
+        f = int(reached[0])                   # first frame with the front past 75% of the target
+    elif np.isfinite(main).any():
+        f = int(np.nanargmax(main))
+    else:
+        f = len(t) - 1
+    behind = (x > xi + 1.5 * w) & (x < main[f] - 2.5 * w) & (prof["count"][f] > 0)
+    front = (x > main[f] - 3 * w) & (x < main[f] + 2 * w)
+    vm = prof["von_mises"][f]
+    vm_plateau = float(np.median(vm[behind])) if behind.any() else np.nan
+    vm_front = float(vm[front].max()) if front.any() else np.nan
+    sxx = float(np.median(-prof["stress"][f, behind, 0])) if behind.any() else np.nan
+    u_behind = float(np.median(prof["velocity"][f, behind, 0])) + 0.5 * v if behind.any() else np.nan
+    precursor_amp = np.nan
+    ahead = (x > main[f] + 2 * w) & (x < pre[f] + w) & (prof["count"][f] > 0)
+    if np.isfinite(pre[f]) and ahead.any():
+        precursor_amp = float(np.median(-prof["stress"][f, ahead, 0]))
+    # free-surface velocity (target rest frame)
+    ft, fv = run["fsv_t"], run["fsv_v"]
+    arrive = np.nonzero(fv > 0.1 * v)[0]
+    fsv_plateau = pullback = t_arrival = fsv_min = np.nan
+    cL = math.sqrt(1.5) * setup["c0"]
+    tau = 2.0 * setup["flyer"] / cL
+    if len(arrive):
+        t_arrival = ft[arrive[0]]
+        win = (ft > t_arrival + 0.25 * tau) & (ft < t_arrival + 0.8 * tau)
+        if win.any():
+            fsv_plateau = float(np.median(fv[win]))
+            after = ft > t_arrival + 0.8 * tau
+            if after.any():
+                fsv_min = float(fv[after].min())
+                pullback = fsv_plateau - fsv_min
+    return {"frame": f, "t_state": t[f], "main": main, "pre": pre, "plateau": plateau,
+            "D_main": D_main, "D_pre": D_pre, "vm_plateau": vm_plateau, "vm_front": vm_front,
+            "sxx_plateau": sxx, "u_behind": u_behind, "precursor_amp": precursor_amp,
+            "fsv_plateau": fsv_plateau, "fsv_min": fsv_min, "pullback": pullback, "t_arrival": t_arrival,
+            "separated": _separated(setup), "tau": tau}
+
+
+def _separated(setup):
+    """True if the target has split (a gap wider than 1.5 r0 across its thickness) or left the flyer."""
+    atoms = setup["atoms"]
+    x = np.sort(atoms.positions[:, 0])
+    gaps = np.diff(x)
+    return bool(gaps.max() > 1.5 * setup["r0"])
+
+
+# --------------------------------------------------------------------------- output
+def _pick_frames(prof, times):
+    t = prof["t"]
+    return sorted({int(np.argmin(np.abs(t - tt))) for tt in times})
+
+
+def plot_impact(results, path, times_by_sample):
+    plt = matplotlib_agg()
+    n = len(results)
+    fig, axs = plt.subplots(n, 3, figsize=(16, 4.2 * n), squeeze=False)
+    for row, (name, (setup, run, an)) in enumerate(results.items()):
+        prof = run["profiles"]
+        x = prof["x"] / units.um
+        frames = _pick_frames(prof, times_by_sample[name])
+        cols = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for k, f in enumerate(frames):
+            ok = prof["count"][f] > 0
+            c = cols[k % len(cols)]
+            lab = f"t = {prof['t'][f] / units.ns:.0f} ns"
+            axs[row, 0].plot(x[ok], prof["stress"][f, ok, 0] / units.GPa, "-", color=c, lw=1.3, label=lab + " xx")
+            axs[row, 0].plot(x[ok], prof["stress"][f, ok, 1] / units.GPa, "--", color=c, lw=0.9)
+            axs[row, 0].plot(x[ok], prof["stress"][f, ok, 2] / units.GPa, ":", color=c, lw=0.9)
+            axs[row, 1].plot(x[ok], prof["von_mises"][f, ok] / units.GPa, "-", color=c, lw=1.2, label=lab)
+        axs[row, 0].set_ylabel("stress (GPa): xx solid, yy dashed, zz dotted")
+        axs[row, 1].set_ylabel("von Mises intensity (GPa)")
+        axs[row, 1].axhline(an["vm_plateau"] / units.GPa, color="k", lw=0.7, ls="--",
+                            label=f"plateau {an['vm_plateau'] / units.GPa:.3f} GPa")
+        for c in (0, 1):
+            axs[row, c].set_xlabel("x (um)")
+            axs[row, c].legend(fontsize=7)
+            axs[row, c].axvline(setup["x_impact"] / units.um, color="gray", lw=0.5)
+        axs[row, 0].set_title(f"{name}: stress profiles (target at right)")
+        axs[row, 1].set_title(f"{name}: intensity, front peak {an['vm_front'] / units.GPa:.2f} GPa")
+        vm = np.where(prof["count"] > 0, prof["von_mises"], np.nan) / units.GPa
+        im = axs[row, 2].imshow(vm, aspect="auto", origin="lower", cmap="viridis",
+                                extent=[x[0], x[-1], prof["t"][0] / units.ns, prof["t"][-1] / units.ns],
+                                vmin=0, vmax=np.nanpercentile(vm, 99))
+        tt = prof["t"] / units.ns
+        axs[row, 2].plot(an["main"] / units.um, tt, "w.", ms=3,
+                         label=f"main wave {an['D_main'] / units.km_s:.2f} km/s")
+        axs[row, 2].plot(an["pre"] / units.um, tt, "r.", ms=2,
+                         label=f"precursor {an['D_pre'] / units.km_s:.2f} km/s")
+        axs[row, 2].set_xlim(x[0], x[-1])
+        axs[row, 2].set_xlabel("x (um)")
+        axs[row, 2].set_ylabel("t (ns)")
+        axs[row, 2].legend(fontsize=7, loc="upper left")
+        axs[row, 2].set_title(f"{name}: x-t map of the intensity (GPa)")
+        fig.colorbar(im, ax=axs[row, 2])
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_visar(results, path):
+    plt = matplotlib_agg()
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    v = None
+    for name, (setup, run, an) in results.items():
+        v = setup["v"]
+        ax.plot(run["fsv_t"] / units.ns, run["fsv_v"] / units.m_s, lw=1.2,
+                label=f"{name}: plateau {an['fsv_plateau'] / units.m_s:.0f} m/s, pullback "
+                      f"{an['pullback'] / units.m_s:.0f} m/s")
+    if v is not None:
+        ax.axhline(v / units.m_s, color="k", ls="--", lw=0.8, label=f"impact speed {v / units.m_s:.0f} m/s")
+    ax.set_xlabel("t (ns)")
+    ax.set_ylabel("rear free-surface velocity (m/s, target frame)")
+    ax.set_title("VISAR trace of the target's rear face")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_visar_csv(path, run):
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["t_ns", "free_surface_velocity_m_s"])
+        for t, u in zip(run["fsv_t"], run["fsv_v"]):
+            w.writerow([f"{t / units.ns:.6g}", f"{u / units.m_s:.6g}"])
+    return path
+
+
+# --------------------------------------------------------------------------- scene: plate impact
+PARAMS = [
+    Param("sample", "both", "single crystal ([100]), polycrystal, or both", kind="choice",
+          choices=("single", "polycrystal", "both")),
+    Param("v", 500.0, "relative impact speed (each plate moves at v/2)", unit="m/s", low=0.0,
+          high=5000.0, low_open=True),
+    Param("r0", 10.0, "cluster size", unit="um", low=0.0, low_open=True),
+    Param("flyer", 25.0, "flyer thickness, in r0", low=4.0),
+    Param("target", 50.0, "target thickness, in r0", low=4.0),
+    Param("width", 16.0, "periodic width across (y, z), in r0 (rounded to sqrt(2) r0 cells)", low=3.0),
+    Param("grain_size", 8.0, "polycrystal: mean grain diameter, in r0", low=3.0),
+    Param("d_min", 0.85, "polycrystal: minimum distance at grain boundaries, in r0", low=0.6, high=1.1),
+    Param("porosity", None, "polycrystal: target porosity (sets d_min by bisection)", low=0.0,
+          high=0.5, optional=True),
+    Param("J", 50.0, "pair damping Gamma = c0/(J r0) (free surfaces: damped); none = off", low=0.0,
+          low_open=True, optional=True),
+    Param("noise", 10.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
+    Param("seed", 1, "random seed (grains, orientations, noise)", kind="int", low=0),
+    Param("duration", None, "run time; none = (target + 3 flyer)/c_L (x1.6 for a polycrystal)",
+          unit="ns", low=0.0,
+          low_open=True, optional=True),
+    Param("profile_times", "auto", "profile times in ns, comma separated, or auto (5 times "
+          "while the wave crosses the target)", kind="str"),
+    Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
+    Param("relax_cycles", 12, "polycrystal: quench cycles of 100 steps before the impact", kind="int", low=0),
+]
+
+
+def _profile_times(text, setup):
+    if str(text).strip().lower() == "auto":
+        cL = math.sqrt(1.5) * setup["c0"]
+        transit = setup["target"] / cL
+        return [f * transit for f in (0.2, 0.4, 0.6, 0.8, 1.0)]
+    try:
+        return [float(s) * units.ns for s in str(text).split(",") if s.strip()]
+    except ValueError:
+        raise InputError("profile_times", text, "auto or times in ns like 20,40,60") from None
+
+
+def impact_quantities(name, setup, an, mat):
+    v = setup["v"]
+    p = "sc_" if name == "single" else "pc_"
+    ref = hugoniot(mat.hugoniot or "Al-1100") if mat.name == "Al" else None
+    u = 0.5 * v
+    Pref = ref.rho0_g_cm3 * units.g_cm3 * ref.D(u) * u / units.GPa if ref else None
+    q = {
+        p + "sigma_u_plateau": Quantity(an["vm_plateau"] / units.GPa, "GPa",
+                                        note="von Mises intensity behind the front (median of slabs)"),
+        p + "sigma_u_front": Quantity(an["vm_front"] / units.GPa, "GPa", note="intensity peak at the front"),
+        p + "sigma_xx_plateau": Quantity(an["sxx_plateau"] / units.GPa, "GPa", Pref,
+                                         note="-sigma_xx behind the front vs rho0 D u (Al-1100, u = v/2)"),
+        p + "u_behind": Quantity(an["u_behind"] / units.m_s, "m/s", u / units.m_s,
+                                 note="particle velocity behind the front, target frame"),
+        p + "D_main": Quantity(an["D_main"] / units.km_s, "km/s", ref.D(u) / units.km_s if ref else None,
+                               note="main wave speed in the target's frame vs the Hugoniot"),
+        p + "D_precursor": Quantity(an["D_pre"] / units.km_s, "km/s",
+                                    note="speed of the leading edge (4% of the plateau or 0.15 GPa)"),
+        p + "precursor_amp": Quantity(an["precursor_amp"] / units.GPa, "GPa",
+                                      note="-sigma_xx between precursor and main front"),
+        p + "fsv_plateau": Quantity(an["fsv_plateau"] / units.m_s, "m/s", v / units.m_s,
+                                    note="rear free-surface velocity plateau vs the impact speed"),
+        p + "pullback": Quantity(an["pullback"] / units.m_s, "m/s",
+                                 note="free-surface plateau minus the minimum after it"),
+    }
+    if setup["reports"][0] is not None:
+        por = np.mean([r["porosity"] for r in setup["reports"]])
+        q[p + "porosity"] = Quantity(por, "", note="1 - rho/rho0 of the plates as built")
+    return q, ref
+
+
+@register("plate-impact", "two Al plates colliding: stress and von Mises profiles, precursor, VISAR trace; "
+          "single crystal vs polycrystal", PARAMS)
+def plate_impact_scene(vals, out=None, progress=True):
+    t0 = time.perf_counter()
+    samples = ("single", "polycrystal") if vals["sample"] == "both" else (vals["sample"],)
+    results, quantities, notes, times_by = {}, {}, [], {}
+    for name in samples:
+        setup = build_impact(name, "Al", vals["v"], vals["r0"], vals["flyer"], vals["target"], vals["width"],
+                             vals["grain_size"], vals["d_min"], vals["porosity"], vals["seed"], vals["noise"],
+                             vals["J"], relax_cycles=vals["relax_cycles"])
+        run = run_impact(setup, vals["duration"], vals["frames"], progress=progress)
+        an = analyse_impact(setup, run)
+        results[name] = (setup, run, an)
+        times_by[name] = _profile_times(vals["profile_times"], setup)
+        q, ref = impact_quantities(name, setup, an, setup["material"])
+        quantities.update(q)
+        n = len(setup["atoms"])
+        notes.append(f"{name}: {n} clusters, {run['nsteps']} steps, {run['t_run']:.1f} s stepping, "
+                     f"{'target split or separated' if an['separated'] else 'no separation'}")
+        if setup["reports"][0] is not None:
+            notes.append("polycrystal flyer: " + _summary(setup["reports"][0]))
+        if setup["relax"] is not None:
+            s = setup["relax"]["stress"] / units.GPa
+            notes.append(f"relaxed: mean stress xx yy zz = {s[0]:.3f} {s[1]:.3f} {s[2]:.3f} GPa, nearest "
+                         f"pair {setup['relax']['min_r_over_r0']:.3f} r0")
+    if "single" in results and "polycrystal" in results:
+        a, b = results["single"][2], results["polycrystal"][2]
+        quantities["plateau_ratio"] = Quantity(b["vm_plateau"] / a["vm_plateau"], "",
+                                               note="polycrystal / single-crystal intensity plateau")
+    files = []
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        plot_impact(results, out / "plate_impact_profiles.png", times_by)
+        plot_visar(results, out / "plate_impact_visar.png")
+        files += [out / "plate_impact_profiles.png", out / "plate_impact_visar.png"]
+        for name, (setup, run, an) in results.items():
+            prof = run["profiles"]
+            files.append(write_profiles_csv(out / f"plate_impact_profiles_{name}.csv", prof,
+                                            frames=_pick_frames(prof, times_by[name])))
+            files.append(write_visar_csv(out / f"plate_impact_visar_{name}.csv", run))
+    return SceneResult("plate-impact", quantities, time.perf_counter() - t0, files=files, notes=notes)
+
+
+def _summary(r):
+    return (f"{r['n_clusters']} clusters, {r['n_grains']} grains, {r['clusters_per_grain_mean']:.0f} per "
+            f"grain, porosity {100 * r['porosity']:.1f}%, d_min {r['d_min_r0']:.3f} r0")
+
+
+# --------------------------------------------------------------------------- polycrystal shock (D-u)
+def polycrystal_shock(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
+                      length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
+                      noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12, frames=40,
+                      progress=True):
+    """Piston shock at ``u`` in a relaxed polycrystal (or a [100] single crystal): D, u, P, rho.
+
+    The block (``length`` x ``width`` x ``width`` r0, periodic across) is
+    relaxed (:func:`relax_sample`), a 1.5 r0 layer at x-min becomes the
+    piston, and the shock scene's tracker (:func:`clusterdyn.scenes.shock.run_shock`)
+    fits D.  The density ahead of the front is the porous sample's own.
+
+    Returns
+    -------
+    (ShockState, dict)
+        The state and a dict with the sample report, rho0 of the sample and notes.
+    """
+    mat = get_material(material)
+    a = SQRT2 * r0
+    W = max(2, int(round(width / SQRT2))) * a
+    if sample == "single":
+        atoms = fcc_packing(mat, r0, direction="100", shape=Plate(length * r0, W, axis=0),
+                            pbc=(False, True, True))
+        report = None
+    else:
+        atoms = polycrystal(mat, r0, Plate(length * r0, W, axis=0), grain_size=grain_size * r0, seed=seed,
+                            pbc=(False, True, True), d_min=d_min, target_porosity=porosity)
+        report = atoms.info["polycrystal"]
+    atoms.set_cell([(length + 40) * r0, W, W])
+    calc = ClusterDynamics()
+    atoms.calc = calc
+    relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
+    atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 2 * r0
+    calc.setup(atoms)
+    pot = calc.potentials[0]
+    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u)
+    thermal_noise(atoms, noise, seed, exclude=mask)
+    atoms.set_constraint(piston)
+    atoms.set_momenta(atoms.get_momenta())
+    dt = dt_factor * r0 / (pot.c0 + u)
+    dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    L = np.ptp(atoms.positions[:, 0])
+    rho0 = atoms.get_masses().sum() / ((L + a / 2) * W * W)
+    try:
+        d_guess = hugoniot("Al-1100").D(u) if mat.name == "Al" else pot.c0 + 1.3 * u
+    except InputError:
+        d_guess = pot.c0 + 1.3 * u
+    nsteps = int(math.ceil(0.8 * L / d_guess / dt))
+    setup = ShockSetup(atoms, calc, dyn, piston, mask, nsteps, max(a, r0), L, mat.replace(rho0=rho0), u)
+    tracker, state, t_run = run_shock(setup, frames, progress, desc=f"shock ({sample})")
+    return state, {"report": report, "rho0": rho0, "relax": relax, "n": len(atoms), "nsteps": nsteps,
+                   "t_run": t_run, "tracker": tracker}
+
+
+SHOCK_PARAMS = [
+    Param("u", 1.0, "piston speed", unit="km/s", low=0.0, high=10.0, low_open=True),
+    Param("porosity", 0.06, "target porosity of the polycrystal", low=0.0, high=0.5),
+    Param("grain_size", 8.0, "mean grain diameter, in r0", low=3.0),
+    Param("r0", 10.0, "cluster size", unit="um", low=0.0, low_open=True),
+    Param("length", 80.0, "block length along the shock, in r0", low=10.0),
+    Param("width", 16.0, "periodic width across, in r0", low=3.0),
+    Param("seed", 1, "random seed", kind="int", low=0),
+    Param("single", True, "also run a [100] single crystal for comparison", kind="bool"),
+    Param("frames", 40, "profiles recorded over the run", kind="int", low=5),
+]
+
+
+@register("polycrystal-shock", "piston shock in a relaxed Al polycrystal of given porosity: D-u point "
+          "beside the single crystal and the experimental Hugoniot", SHOCK_PARAMS)
+def polycrystal_shock_scene(vals, out=None, progress=True):
+    t0 = time.perf_counter()
+    u = vals["u"]
+    mat = get_material("Al")
+    runs = {"pc": polycrystal_shock(u, "polycrystal", r0=vals["r0"], length=vals["length"], width=vals["width"],
+                                    grain_size=vals["grain_size"], porosity=vals["porosity"], seed=vals["seed"],
+                                    frames=vals["frames"], progress=progress)}
+    if vals["single"]:
+        runs["sc"] = polycrystal_shock(u, "single", r0=vals["r0"], length=vals["length"], width=vals["width"],
+                                       seed=vals["seed"], frames=vals["frames"], progress=progress)
+    ref = hugoniot("Al-1100")
+    q, notes = {}, []
+    for key, (state, info) in runs.items():
+        qq, _ = shock_quantities(state, mat, u)
+        for name in ("D", "u", "P", "rho"):
+            q[f"{key}_{name}"] = qq[name]
+        notes.append(f"{key}: {info['n']} clusters, rho0 {info['rho0'] / units.g_cm3:.4f} g/cm3, "
+                     f"{info['nsteps']} steps, {' '.join(state.notes) or 'steady'}")
+    if "pc" in runs and runs["pc"][1]["report"] is not None:
+        notes.append("polycrystal: " + _summary(runs["pc"][1]["report"]))
+        q["pc_porosity"] = Quantity(runs["pc"][1]["report"]["porosity"], "", vals["porosity"])
+    notes.append(f"reference: Al-1100 D = {ref.D(u) / units.km_s:.3f} km/s at u = {u / units.km_s:g} km/s "
+                 "(dense metal; a porous sample's own Hugoniot lies lower)")
+    files = []
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        plt = matplotlib_agg()
+        fig, ax = plt.subplots(figsize=(6, 4.5))
+        uu = np.linspace(0, 3, 50)
+        ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", label="Al-1100 (experiment)")
+        for key, (state, info) in runs.items():
+            lab = {"pc": "CD polycrystal", "sc": "CD single crystal [100]"}[key]
+            if key == "pc" and info["report"] is not None:
+                lab += f" (porosity {100 * info['report']['porosity']:.1f}%)"
+            ax.errorbar([state.u / units.km_s], [state.D_fit / units.km_s],
+                        yerr=[state.D_fit_err / units.km_s], fmt="o", label=lab)
+        ax.set_xlabel("u (km/s)")
+        ax.set_ylabel("D (km/s)")
+        ax.legend()
+        ax.set_title("D-u point")
+        fig.tight_layout()
+        fig.savefig(out / "polycrystal_shock_Du.png", dpi=110)
+        plt.close(fig)
+        files.append(out / "polycrystal_shock_Du.png")
+    return SceneResult("polycrystal-shock", q, time.perf_counter() - t0, files=files, notes=notes)
