@@ -225,11 +225,15 @@ def shock_scene(v, out=None, progress=True, restart=None):
         if H5MDWriter is not None:
             out.mkdir(parents=True, exist_ok=True)
             path = out / "shock.h5md"
+            # the reaction of the sample on the piston (x component), and the pressure it implies
+            area = setup.atoms.cell[1, 1] * setup.atoms.cell[2, 2]
+            obs = {"piston_force": (lambda a: -setup.piston.force[0] / units.N, "N"),
+                   "piston_pressure": (lambda a: -setup.piston.force[0] / area / units.GPa, "GPa")}
             if restart is not None and path.exists():
                 writer = H5MDWriter(str(path), setup.atoms, mode="a", dyn=setup.dyn, parameters=v,
-                                    restart_step=setup.dyn.nsteps)
+                                    restart_step=setup.dyn.nsteps, observables=obs)
             else:
-                writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v)
+                writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v, observables=obs)
             setup.dyn.attach(writer, interval=max(1, setup.nsteps // v["h5md_frames"]))
             files.append(path)
     try:
