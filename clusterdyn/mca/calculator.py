@@ -135,9 +135,8 @@ class MCA(Calculator):
         deps = np.empty((P, 2))
         dB = np.zeros(n)
         dP = np.empty(n)
-        # split with dB = 0, then once more with the mean-stress increments it gives
-        K.split_strain(dr_p, st.q0_p2, A_n, i_p, j_p, st.linked_p, dB, deps)
-        K.volume_change(deps, st.q0_p2, st.S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP, dB)
+        # split by stiffness (force balance of the 2G eps parts); the mean-stress terms enter
+        # the pair force as the stiffness-weighted mean of the two sides (see docs/mca.md)
         K.split_strain(dr_p, st.q0_p2, A_n, i_p, j_p, st.linked_p, dB, deps)
         K.volume_change(deps, st.q0_p2, st.S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP, dB)
         sigt = np.zeros((P, 2))
@@ -151,8 +150,8 @@ class MCA(Calculator):
         t = np.empty((n, 3))
         s = np.empty((n, 3, 3))
         e = np.empty(n)
-        K.automaton_sums(d_pc, r_p, st.S_p, st.q0_p2, arm_p2, sigt, taut, first_n, side_p, side_s,
-                         omega_n, G_n, K_n, f, t, s, e)
+        K.automaton_sums(i_p, j_p, d_pc, r_p, st.S_p, st.q0_p2, arm_p2, sigt, taut, first_n, side_p,
+                         side_s, omega_n, G_n, K_n, f, t, s, e)
         if st.dim == 2:
             f[:, 2] = 0.0
             t[:, :2] = 0.0

@@ -8,9 +8,8 @@ Pairs are stored once (i < j by id); the separation is
 Per-side values are the specific normal force ``sigma`` (tension positive)
 and the specific tangential force ``tau`` (a vector in the contact plane, in
 the *pair* convention: the tangential force on automaton i per unit area).
-The force on i is ``S (sigma_bar n + tau_bar)`` with the means over the two
-sides (equal unless a per-automaton correction, e.g. radial return, made them
-differ), the force on j its opposite: linear and angular momentum are
+The force on i is ``S (sigma_bar n + tau_bar)`` with the stiffness-weighted
+means over the two sides, the force on j its opposite: linear and angular momentum are
 conserved pair by pair.
 
 All kernels are module-level serial ``@njit(cache=True)`` (the samples MCA runs here are
@@ -142,7 +141,12 @@ def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
     """Split the elongation between the two automata (physics.md 2.4).
 
     ``d eps_i = [A_j dr + q0_j (dB_j - dB_i)] / (A_i q0_j + A_j q0_i)`` with
-    ``A = 2G`` and ``dB = (1 - 2G/3K) dP``; unlinked pairs get zero.
+    ``A = 2G`` and ``dB = (1 - 2G/3K) dP``; unlinked pairs get zero.  The
+    calculator passes ``dB = 0``: the mean-stress terms are balanced in the pair
+    force instead (stiffness-weighted mean of the sides).  The lagged dB
+    correction of physics.md 2.4 is a Jacobi iteration on P whose gain on the
+    checkerboard mode is about ``z (1 - 2G/3K) K / 4G`` (z neighbours): it
+    diverged for nu >= 0.3 in our tests, so it is not used (docs/mca.md).
     """
     for p in range(i_p.shape[0]):
         if linked_p[p] == 0:
@@ -229,11 +233,14 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
 
 
 @njit(cache=True)
-def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
+def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
                    omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
     """Forces, torques, Love-Weber stress and elastic energy of every automaton.
 
-    ``F_i = sum_j S (sigma_bar n_ij + tau_bar)``,
+    ``F_i = sum_j S (sigma_bar n_ij + tau_bar)`` with the stiffness-weighted mean over the two
+    sides, ``x_bar = w_i x_ij + w_j x_ji``, ``w_i = q_i G_j / (q_i G_j + q_j G_i)`` (1/2 for equal
+    automata): with it the normal force is the derivative of the elastic energy
+    ``sum_i [sum_j G_i q_ij S_ij eps_ij^2 + lambda_i dOmega_i^2 / (2 Omega_i)]``,
     ``T_i = sum_j q_ij S n_ij x tau_bar`` (MCA 6);
     ``sigma^i = (1/Omega_i) sum_j q_ij S (sigma_ij n + tau_ij) (x) n`` (symmetrised);
     ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
@@ -254,10 +261,16 @@ def automaton_sums(d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side
             ny = d_pc[p, 1] / r
             nz = d_pc[p, 2] / r
             S = S_p[p]
-            sb = 0.5 * (sig_p2[p, 0] + sig_p2[p, 1])
-            tbx = 0.5 * (tau_p2c[p, 0, 0] + tau_p2c[p, 1, 0])
-            tby = 0.5 * (tau_p2c[p, 0, 1] + tau_p2c[p, 1, 1])
-            tbz = 0.5 * (tau_p2c[p, 0, 2] + tau_p2c[p, 1, 2])
+            # stiffness weights of the two sides: w_i = q_i G_j / (q_i G_j + q_j G_i)
+            gi = G_n[i_p[p]]
+            gj = G_n[j_p[p]]
+            wden = q0_p2[p, 0] * gj + q0_p2[p, 1] * gi
+            w0 = q0_p2[p, 0] * gj / wden
+            w1 = 1.0 - w0
+            sb = w0 * sig_p2[p, 0] + w1 * sig_p2[p, 1]
+            tbx = w0 * tau_p2c[p, 0, 0] + w1 * tau_p2c[p, 1, 0]
+            tby = w0 * tau_p2c[p, 0, 1] + w1 * tau_p2c[p, 1, 1]
+            tbz = w0 * tau_p2c[p, 0, 2] + w1 * tau_p2c[p, 1, 2]
             sgn = 1.0 if s == 0 else -1.0
             fx += sgn * S * (sb * nx + tbx)
             fy += sgn * S * (sb * ny + tby)

@@ -15,7 +15,8 @@ damage, ``count_p`` compressed steps (healing), and the per-pair material
 parameters (strengths, friction, welding threshold) fixed at set-up.
 
 Per automaton (``_n``, by row at set-up, stored by id): ``thlast_nc``
-rotation at the last commit, ``epsp_n`` plastic strain, ``omega_n`` volume.
+rotation at the last commit, ``epsp_n`` plastic strain, ``omega_n`` volume (Voronoi cell
+clipped at the sample surface).
 """
 
 import numpy as np
@@ -112,8 +113,11 @@ class MCAState:
         self.D_p = np.zeros(npair)
         self.count_p = np.zeros(npair, np.int64)
         self.id_n = ids.copy()
-        self.omega_n = geom["omega_n"].copy()
-        self.vcell_n = geom["vcell_n"].copy()
+        # automaton volume: its Voronoi cell clipped at the sample surface (for an interior
+        # automaton equal to (1/3) sum_j q_ij S_ij); surface automata keep the faces they have
+        # but their true volume, so their Love-Weber stress is not inflated by missing faces
+        self.omega_n = geom["vcell_n"].copy()
+        self.omega_faces_n = geom["omega_n"].copy()
         self.thlast_nc = np.array(atoms.arrays.get("theta", np.zeros((len(atoms), 3))), float)
         self.epsp_n = np.zeros(len(atoms))
         rows = self.rows(ids)
@@ -140,7 +144,6 @@ class MCAState:
         self.box_c, self.periodic_c = _box(atoms)
         self._inc_key = None
         self.set_state(d)
-        self.vcell_n = np.zeros(len(self.id_n))
         ids = np.asarray(atoms.arrays["id"], np.int64)
         mid = np.asarray(atoms.arrays["material"], np.int64)
         self.mat_id_n = mid[self.rows(ids)[self.id_n]]
