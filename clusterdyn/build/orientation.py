@@ -27,13 +27,11 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from .lattice import SQRT2
+from .lattice import _FCC_BASIS, SQRT2
 
 #: the 12 nearest-neighbour directions of fcc (unit vectors, crystal frame)
 FCC_NN = np.array([v for v in itertools.product((-1, 0, 1), repeat=3)
                    if sum(abs(c) for c in v) == 2], dtype=float) / SQRT2
-#: the 4 sites of the conventional fcc cell (fractions of the cube edge)
-_FCC_BASIS = np.array([[0, 0, 0], [0, .5, .5], [.5, 0, .5], [.5, .5, 0]])
 
 
 @functools.lru_cache(maxsize=None)

@@ -53,6 +53,7 @@ import numpy as np
 from scipy.spatial import Voronoi, cKDTree
 from scipy.spatial.transform import Rotation
 
+from .. import units
 from ..errors import InputError, check_positive
 from ..materials import get_material
 from .lattice import SQRT2, fcc_sites, make_cluster_atoms
@@ -249,7 +250,6 @@ def grain_statistics(atoms, r0=None):
     std, min, max), mean equivalent grain diameter (in r0 and um), from
     ``N_g r0^3/sqrt(2) = pi/6 d^3``.
     """
-    from .. import units
     if "grain" not in atoms.arrays:
         raise InputError("atoms", "Atoms without 'grain'", "a polycrystal (arrays['grain'])")
     r0 = float(atoms.info["cd_r0"][0]) if r0 is None else r0
@@ -428,8 +428,9 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
     atoms.new_array("grain", grain)
     atoms.info["grain_rotations"] = rots
     atoms.info["grain_seeds"] = seeds
-    report = {"porosity": porosity_of(len(pos)),
-              "density_g_cm3": None,
+    porosity = porosity_of(len(pos))
+    report = {"porosity": porosity,
+              "density_g_cm3": mat.rho0 * (1.0 - porosity) / units.g_cm3,
               "d_min_r0": float(d_min),
               "target_porosity": target_porosity,
               "n_sites_before_removal": int(n_sites),
@@ -439,8 +440,6 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
               "n_seeds": n_grains,
               "shape_volume_A3": vol,
               "pbc": pbc.tolist()}
-    from .. import units
-    report["density_g_cm3"] = mat.rho0 * (1.0 - report["porosity"]) / units.g_cm3
     report.update(grain_statistics(atoms, r0))
     report["build_time_s"] = time.perf_counter() - t0
     atoms.info["polycrystal"] = report
