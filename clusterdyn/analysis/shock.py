@@ -34,7 +34,10 @@ def binned_profile(atoms, virials=None, axis=0, width=None, lo=None, hi=None, ex
     -------
     dict with ``x`` (slab centres), ``count``, ``mass``, ``density`` (amu/A^3),
     ``velocity`` ((nb, 3) mean velocity, A/time), ``stress`` ((nb, 6) virial +
-    kinetic, eV/A^3, tension positive), ``width``, ``area``.
+    kinetic, eV/A^3, tension positive, lab-frame Voigt xx yy zz yz xz xy),
+    ``pressure`` ((nb,) mean pressure ``-tr(stress)/3``), ``von_mises`` ((nb,)
+    stress intensity of CD eq. 4, :func:`clusterdyn.analysis.stress.von_mises`),
+    ``width``, ``area``.
     """
     pos = atoms.positions[:, axis]
     m = atoms.get_masses()
@@ -67,10 +70,11 @@ def binned_profile(atoms, virials=None, axis=0, width=None, lo=None, hi=None, ex
         stress[:, c] = -np.bincount(idx, weights=mk * dv[:, p] * dv[:, q], minlength=nb)
         if virials is not None:
             stress[:, c] += np.bincount(idx, weights=np.asarray(virials)[keep, c], minlength=nb)
-    # the profile's axis becomes "xx": permute so that component 0 is along `axis`
     stress /= vol
+    from .stress import pressure, von_mises      # (stress.py imports this module)
     return {"x": 0.5 * (edges[1:] + edges[:-1]), "edges": edges, "count": count, "mass": mass,
-            "density": mass / vol, "velocity": vel, "stress": stress, "width": width, "area": area}
+            "density": mass / vol, "velocity": vel, "stress": stress, "pressure": pressure(stress),
+            "von_mises": von_mises(stress), "width": width, "area": area}
 
 
 def front_position(x, u_axis, u_piston, fraction=0.5):
@@ -104,9 +108,51 @@ def fit_front(times, fronts):
     return float(D), float(x0), float(np.sqrt(np.mean(res ** 2)))
 
 
+#: A run is steady when (physics.md 1.5, docs/hugoniot.md) the front position is linear in
+#: time -- rms residual of the line at most STEADY_FIT_RMS slab widths and D from the first and
+#: second half of the fit window within STEADY_D_HALVES of each other -- and the mean particle
+#: velocity behind the front is within STEADY_U_TOL of the piston speed.
+STEADY_FIT_RMS = 0.5
+STEADY_D_HALVES = 0.03
+STEADY_U_TOL = 0.03
+
+
 @dataclass
 class ShockState:
-    """The state behind a shock front, from a run's frames (ASE units)."""
+    """The state behind a shock front, from a run's frames (ASE units).
+
+    Attributes
+    ----------
+    D_fit, D_fit_err : float
+        Front speed from the straight-line fit of front position against time,
+        and the standard error of the slope (Angstrom/ASE time).
+    fit_rms : float
+        Rms residual of that fit (Angstrom); ``fit_rms / width`` in slabs.
+    D_halves : (float, float)
+        D fitted over the first and the second half of the fit window.
+    u, u_spread : float
+        Mass-weighted mean particle velocity along the shock in the steady
+        region (between ``piston_gap`` slabs ahead of the piston and
+        ``behind_gap`` slabs behind the front), mean and std over frames.
+    rho, rho_spread : float
+        Density there, from the Lagrangian compression ``dx/dX`` (slope of
+        current against initial positions of the region's particles):
+        ``rho = M / (dx/dX * V_rest)``.  Free of the plane-counting noise of slabs.
+    rho_bins : float
+        The same from the slab densities (for comparison).
+    P, P_spread : float
+        Longitudinal stress ``-sigma_xx`` of the region: virial plus kinetic
+        part about each slab's mean velocity, over the region's current volume.
+    sigma_u, sigma_u_spread : float
+        Von Mises intensity (CD eq. 4) of the region's mean stress.
+    D_mass, D_mass_spread : float
+        D from mass conservation ``rho0 D = rho (D - u)``, i.e.
+        ``D = u / (1 - dx/dX)``.
+    P_momentum : float
+        ``rho0 D_fit u`` (momentum conservation), to compare with P.
+    steady : bool
+        See STEADY_FIT_RMS, STEADY_D_HALVES, STEADY_U_TOL.
+    """
 
     D_fit: float
     D_fit_err: float
@@ -124,10 +170,39 @@ class ShockState:
     steady: bool
     n_frames: int
     notes: list = field(default_factory=list)
+    D_halves: tuple = (np.nan, np.nan)
+    D_mass_spread: float = np.nan
+    sigma_u: float = np.nan
+    sigma_u_spread: float = np.nan
+    rho_bins: float = np.nan
+    width: float = np.nan
+    steady_reasons: list = field(default_factory=list)
+
+    @property
+    def mass_check(self):
+        """``D_mass / D_fit - 1``."""
+        return self.D_mass / self.D_fit - 1.0
+
+    @property
+    def momentum_check(self):
+        """``P / (rho0 D u) - 1``."""
+        return self.P / self.P_momentum - 1.0
+
+
+def _line(t, x):
+    A = np.vstack([t, np.ones_like(t)]).T
+    (D, x0), *_ = np.linalg.lstsq(A, x, rcond=None)
+    return float(D), float(x0)
 
 
 class ShockTracker:
     """Collect profiles frame by frame and reduce them to a :class:`ShockState`.
+
+    Every frame gives a slab profile (:func:`binned_profile`), the front
+    position (:func:`front_position` at half the piston speed) and the state of
+    the region between the piston and the front (particles more than
+    ``piston_gap`` slabs ahead of the piston and ``behind_gap`` slabs behind
+    the front): mean velocity, Lagrangian compression, stress.
 
     Parameters
     ----------
@@ -138,38 +213,97 @@ class ShockTracker:
     width : float
         Slab width (Angstrom).
     axis : int
+    lo, hi : float, optional
+        Range of the slabs along ``axis``.
+    rest_volume : (N,) array, optional
+        Volume of each particle at rest (Angstrom^3); default ``m / rho0``.
+        Two-phase samples pass each cluster's own ``r0^3 / sqrt(2)``.
+    behind_gap, piston_gap : float
+        Gaps (slab widths) that keep the front's ramp and the piston's
+        start-up out of the averaged region.
     """
 
-    def __init__(self, rho0, u_piston, width, axis=0, lo=None, hi=None):
+    def __init__(self, rho0, u_piston, width, axis=0, lo=None, hi=None, rest_volume=None,
+                 behind_gap=3.0, piston_gap=3.0):
         self.rho0, self.u_piston, self.width, self.axis = rho0, u_piston, width, axis
         self.lo, self.hi = lo, hi
+        self.rest_volume = None if rest_volume is None else np.asarray(rest_volume, float)
+        self.behind_gap, self.piston_gap = float(behind_gap), float(piston_gap)
+        self.X0 = None
         self.frames = []
 
     def get_state(self):
         """Everything needed to resume (for checkpoints)."""
         return {"rho0": self.rho0, "u_piston": self.u_piston, "width": self.width, "axis": self.axis,
-                "lo": self.lo, "hi": self.hi, "frames": self.frames}
+                "lo": self.lo, "hi": self.hi, "frames": self.frames, "X0": self.X0,
+                "rest_volume": self.rest_volume, "behind_gap": self.behind_gap,
+                "piston_gap": self.piston_gap}
 
     @classmethod
     def from_state(cls, st):
         t = cls(float(st["rho0"]), float(st["u_piston"]), float(st["width"]), int(st["axis"]),
-                None if st["lo"] is None else float(st["lo"]), None if st["hi"] is None else float(st["hi"]))
+                None if st["lo"] is None else float(st["lo"]), None if st["hi"] is None else float(st["hi"]),
+                rest_volume=st.get("rest_volume"), behind_gap=float(st.get("behind_gap", 3.0)),
+                piston_gap=float(st.get("piston_gap", 3.0)))
         t.frames = [dict(f) for f in st["frames"]]
+        if st.get("X0") is not None:
+            t.X0 = np.asarray(st["X0"], float)
         return t
 
     def add(self, time, atoms, virials, piston_x, exclude=None):
-        prof = binned_profile(atoms, virials, self.axis, self.width, self.lo, self.hi, exclude)
-        u_ax = prof["velocity"][:, self.axis]
+        """Record one frame; returns the front position (nan if none)."""
+        ax = self.axis
+        if self.X0 is None:
+            self.X0 = atoms.positions[:, ax].copy()
+        if self.rest_volume is None:
+            self.rest_volume = atoms.get_masses() / self.rho0
+        prof = binned_profile(atoms, virials, ax, self.width, self.lo, self.hi, exclude)
+        u_ax = prof["velocity"][:, ax]
         xf = front_position(prof["x"], u_ax, self.u_piston)
-        self.frames.append({"t": time, "front": xf, "piston": piston_x, "profile": prof})
+        frame = {"t": float(time), "front": float(xf), "piston": float(piston_x), "profile": prof}
+        frame.update(self._region(atoms, virials, prof, xf, piston_x, exclude))
+        self.frames.append(frame)
         return xf
 
-    def result(self, x_min_frac=0.2, x_max_frac=0.85, behind_gap=3.0, piston_gap=3.0):
-        """Fit D over frames with the front between the given fractions of the sample length,
-        and average the state between the piston and the front (gaps in slab widths).
+    def _region(self, atoms, virials, prof, xf, piston_x, exclude):
+        ax = self.axis
+        nan = {"n_region": 0, "u_region": np.nan, "slope": np.nan, "rho_region": np.nan,
+               "stress_region": np.full(6, np.nan)}
+        if not np.isfinite(xf):
+            return nan
+        x = atoms.positions[:, ax]
+        keep = np.ones(len(atoms), bool) if exclude is None else ~np.asarray(exclude, bool)
+        a = piston_x + self.piston_gap * self.width
+        b = xf - self.behind_gap * self.width
+        sel = keep & (x > a) & (x < b)
+        X0 = self.X0[sel]
+        if sel.sum() < 8 or np.ptp(X0) < 2 * self.width:
+            return nan
+        m = atoms.get_masses()[sel]
+        v = atoms.get_velocities()[sel]
+        M = m.sum()
+        vbar = (m[:, None] * v).sum(axis=0) / M
+        slope = np.polyfit(X0, x[sel], 1)[0]
+        V = slope * self.rest_volume[sel].sum()
+        # kinetic part about each slab's mean velocity (as in the profile)
+        edges = prof["edges"]
+        k = np.clip(np.floor((x[sel] - edges[0]) / self.width).astype(np.int64), 0, len(prof["x"]) - 1)
+        dv = v - prof["velocity"][k]
+        pairs = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+        W = np.array([-(m * dv[:, p] * dv[:, q]).sum() for p, q in pairs])
+        if virials is not None:
+            W = W + np.asarray(virials)[sel].sum(axis=0)
+        return {"n_region": int(sel.sum()), "u_region": float(vbar[ax]), "slope": float(slope),
+                "rho_region": float(M / V), "stress_region": W / V}
+
+    def result(self, x_min_frac=0.2, x_max_frac=0.85):
+        """Fit D over the frames with the front between the given fractions of the sample
+        length, and average the state of the region behind the front over the same frames.
         """
         if not self.frames:
             raise ValueError("no frames recorded")
+        from .stress import von_mises
+        ax = self.axis
         lo = self.frames[0]["profile"]["edges"][0]
         hi = self.frames[0]["profile"]["edges"][-1]
         L = hi - lo
@@ -182,34 +316,55 @@ class ShockTracker:
                          f"{x_max_frac:.2f} of the sample; fit uses all frames with a front")
             use = np.isfinite(xf)
         D, x0, rms = fit_front(t[use], xf[use])
-        # standard error of the slope
         tt = t[use]
         D_err = rms / np.sqrt(((tt - tt.mean()) ** 2).sum()) if len(tt) > 2 else np.nan
-        us, rhos, Ps = [], [], []
-        ax = self.axis
-        for f in np.array(self.frames, dtype=object)[use]:
+        halves = (np.nan, np.nan)
+        if len(tt) >= 6:
+            h = len(tt) // 2
+            halves = (_line(tt[:h], xf[use][:h])[0], _line(tt[h:], xf[use][h:])[0])
+        frames = [f for f, ok in zip(self.frames, use) if ok and f.get("n_region", 0) > 0]
+        # the binned density, for comparison
+        rb = []
+        for f in frames:
             p = f["profile"]
-            a = f["piston"] + piston_gap * self.width
-            b = f["front"] - behind_gap * self.width
-            sel = (p["x"] > a) & (p["x"] < b) & (p["count"] > 0)
-            if sel.sum() < 2:
-                continue
-            w = p["mass"][sel]
-            us.append(np.average(p["velocity"][sel, ax], weights=w))
-            rhos.append(p["density"][sel].mean())
-            Ps.append(-p["stress"][sel, ax].mean())
-        if not us:
+            sel = ((p["x"] > f["piston"] + self.piston_gap * self.width)
+                   & (p["x"] < f["front"] - self.behind_gap * self.width) & (p["count"] > 0))
+            if sel.sum():
+                rb.append(p["density"][sel].mean())
+        if not frames:
             notes.append("no steady region between piston and front")
-            us, rhos, Ps = [np.nan], [np.nan], [np.nan]
+            us = rhos = Ps = sus = Dm = slopes = np.array([np.nan])
+        else:
+            us = np.array([f["u_region"] for f in frames])
+            slopes = np.array([f["slope"] for f in frames])
+            rhos = np.array([f["rho_region"] for f in frames])
+            st = np.array([f["stress_region"] for f in frames])
+            Ps = -st[:, ax]
+            sus = von_mises(st)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                Dm = us / (1.0 - slopes)
         u = float(np.mean(us))
-        rho = float(np.mean(rhos))
-        P = float(np.mean(Ps))
-        D_mass = rho * u / (rho - self.rho0) if rho > self.rho0 else np.nan
-        steady = bool(np.isfinite(D) and abs(u - self.u_piston) <= 0.03 * abs(self.u_piston)
-                      and rms < 0.5 * self.width * 4)
+        s_mean = float(np.mean(slopes))
+        D_mass = u / (1.0 - s_mean) if s_mean < 1.0 else np.nan
+        reasons = []
+        if not np.isfinite(D):
+            reasons.append("no front fit")
+        else:
+            if not rms <= STEADY_FIT_RMS * self.width:
+                reasons.append(f"front not linear in time (rms residual {rms / self.width:.2f} slabs > "
+                               f"{STEADY_FIT_RMS})")
+            if np.all(np.isfinite(halves)) and abs(halves[1] - halves[0]) > STEADY_D_HALVES * abs(D):
+                reasons.append(f"D changes along the run ({halves[0] / D:.3f} D -> {halves[1] / D:.3f} D "
+                               f"over the two halves of the fit)")
+        if not abs(u - self.u_piston) <= STEADY_U_TOL * abs(self.u_piston):
+            reasons.append(f"particle velocity behind the front {u / self.u_piston:.3f} of the piston "
+                           f"speed (tolerance {STEADY_U_TOL:.0%})")
+        steady = not reasons
         if not steady:
-            notes.append("run not steady: front not linear in time or particle velocity behind the "
-                         "front more than 3% from the piston speed")
-        return ShockState(D, float(D_err), rms, u, float(np.std(us)), rho, float(np.std(rhos)), P,
-                          float(np.std(Ps)), float(D_mass), float(self.rho0 * D * u), self.rho0,
-                          self.u_piston, steady, int(use.sum()), notes)
+            notes.append("run not steady: " + "; ".join(reasons))
+        return ShockState(
+            D, float(D_err), rms, u, float(np.std(us)), float(np.mean(rhos)), float(np.std(rhos)),
+            float(np.mean(Ps)), float(np.std(Ps)), float(D_mass), float(self.rho0 * D * u), self.rho0,
+            self.u_piston, steady, int(use.sum()), notes, D_halves=tuple(float(h) for h in halves),
+            D_mass_spread=float(np.std(Dm)), sigma_u=float(np.mean(sus)), sigma_u_spread=float(np.std(sus)),
+            rho_bins=float(np.mean(rb)) if rb else np.nan, width=float(self.width), steady_reasons=reasons)

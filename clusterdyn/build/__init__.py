@@ -11,3 +11,5 @@ from .orientation import grain_orientation, misorientation_angle, misorientation
 __all__ += ["polycrystal", "polycrystal_summary", "grain_statistics", "grain_orientation", "misorientation_angle", "misorientation_distribution"]  # noqa: E501
 from ..mca.builders import mca_packing, precrack  # noqa: E402,F401
 __all__ += ["mca_packing", "precrack"]
+from .two_phase import PAPER_CASES, two_phase  # noqa: E402
+__all__ += ["two_phase", "PAPER_CASES"]

@@ -17,7 +17,8 @@ import numpy as np
 from .. import units
 from ..analysis.shock import ShockTracker
 from ..build import fcc_packing, repeat_lengths
-from ..calculators import ClusterDynamics
+from ..build.two_phase import rest_volumes, two_phase
+from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet, default_timestep
@@ -45,6 +46,13 @@ PARAMS = [
     Param("h5md", True, "write an H5MD trajectory (with --out)", kind="bool"),
     Param("h5md_frames", 20, "trajectory frames written to the H5MD file", kind="int", low=1),
     Param("checkpoint_every", 10, "frames between checkpoints (with --out; 0 = none)", kind="int", low=0),
+    Param("attraction", "all", "'initial': only pairs bonded at set-up attract, later contacts only repel "
+          "(remedy for the soft response near 2 km/s, physics.md 1.5)", kind="choice",
+          choices=("all", "initial")),
+    Param("inclusion", None, "material of spherical inclusions (two-phase sample; 'material' is the "
+          "matrix)", kind="choice", choices=CD_MATERIALS, optional=True),
+    Param("inclusion_fraction", 0.28, "mass fraction of the inclusions", low=0.0, high=1.0, low_open=True),
+    Param("inclusion_diameter", 56.0, "diameter of the inclusions", unit="um", low=0.0, low_open=True),
 ]
 
 
@@ -60,19 +68,48 @@ class ShockSetup:
     length: float
     material: object
     u: float
+    rest_volume: object = None      #: (N,) volume of each cluster at rest (two-phase samples)
+    rho0: float = None              #: mean density at rest (default material.rho0)
+    two_phase: dict = None          #: atoms.info['two_phase'] of a two-phase sample
+
+
+def _d_guess(name, u, c0):
+    try:
+        return hugoniot(name).D(u)
+    except InputError:
+        return c0 * math.sqrt(1.5) + 1.3 * u
 
 
 def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 8), r0=5 * units.um,
                 rc=1.15, J=None, noise=10 * units.m_s, seed=1, dt_factor=TIMESTEP_FACTOR,
-                run_fraction=0.8):
-    """Sample, calculator, piston and dynamics of a piston shock (ASE units)."""
+                run_fraction=0.8, attraction="all", inclusion=None, inclusion_fraction=0.28,
+                inclusion_diameter=56 * units.um, r0_inclusion=None):
+    """Sample, calculator, piston and dynamics of a piston shock (ASE units).
+
+    ``attraction="initial"`` marks the set-up bonds (before the noise) and
+    lets only them attract.  With ``inclusion`` the sample is two-phase
+    (:func:`clusterdyn.build.two_phase`: ``material`` is the matrix,
+    ``inclusion_fraction`` the inclusions' mass fraction, placement seeded by
+    ``seed``).  The time step is ``dt_factor * min r0/(c0 + u)`` over the
+    materials.
+    """
     mat = get_material(material)
     if mat.curve is None:
         raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
     if not u > 0:
         raise InputError("u", u, "a positive piston speed")
-    atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
-    calc = ClusterDynamics(rc=rc)
+    if attraction not in ("all", "initial"):
+        raise InputError("attraction", attraction, "'all' or 'initial'")
+    info = None
+    if inclusion in (None, "none"):
+        atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
+    else:
+        atoms = two_phase(mat, inclusion, inclusion_fraction, inclusion_diameter, r0=r0, size=size,
+                          direction=direction, pbc=(False, True, True), seed=seed, r0_inclusion=r0_inclusion)
+        info = atoms.info["two_phase"]
+    calc = ClusterDynamics(rc=rc, attraction=attraction)
+    if attraction == "initial":
+        mark_initial_bonds(atoms, rc)
     atoms.calc = calc
     calc.setup(atoms)
     pot = calc.potentials[0]
@@ -81,18 +118,22 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     thermal_noise(atoms, noise, seed, exclude=mask)
     atoms.set_constraint(piston)
     atoms.set_momenta(atoms.get_momenta())            # applies the piston velocity
-    dt = dt_factor * r0 / (pot.c0 + u)
+    dt = default_timestep(calc, u, dt_factor)
     dyn = DampedVerlet(atoms, timestep=dt, J=J)
     length = atoms.positions[:, 0].max() - atoms.positions[:, 0].min()
-    try:
-        d_guess = hugoniot(mat.name).D(u)
-    except InputError:
-        d_guess = pot.c0 * math.sqrt(1.5) + 1.3 * u
+    vrest = rest_volumes(atoms)
+    rho0 = float(atoms.get_masses().sum() / vrest.sum())
+    if info is None:
+        d_guess = _d_guess(mat.name, u, pot.c0)
+    else:   # the equal-u mixture rule on rough phase Hugoniots; the slower phase sets the run time
+        phi = info["volume_fraction"]
+        d_guess = 1.0 / ((1 - phi) / _d_guess(mat.name, u, pot.c0)
+                         + phi / _d_guess(calc.potentials[1].material.name, u, calc.potentials[1].c0))
     t_end = run_fraction * length / d_guess
     nsteps = int(math.ceil(t_end / dt))
     # slab width: one repeat length along x for [100] (two planes), at least r0
     slab = max(float(repeat_lengths(direction, r0)[0]), r0)
-    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u)
+    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info)
 
 
 def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", checkpoint=None,
@@ -105,8 +146,9 @@ def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", chec
     atoms, calc = setup.atoms, setup.calc
     if tracker is None:
         x0 = atoms.positions[~setup.piston_mask, 0].min()
-        tracker = ShockTracker(setup.material.rho0, setup.u, setup.slab, axis=0, lo=x0,
-                               hi=x0 + setup.length + setup.slab)
+        rho0 = setup.material.rho0 if setup.rho0 is None else setup.rho0
+        tracker = ShockTracker(rho0, setup.u, setup.slab, axis=0, lo=x0,
+                               hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume)
 
     def frame(dyn):
         out = calc.compute(atoms, per_particle=True)
@@ -176,18 +218,26 @@ def plot_shock(tracker, state, path, title=""):
     plt.close(fig)
 
 
-def shock_quantities(state, mat, u):
-    """Quantities of a shock state against the experimental Hugoniot (if the material has one)."""
+def shock_quantities(state, mat, u, reference=True):
+    """Quantities of a shock state against the experimental Hugoniot (if the material has one).
+
+    Besides D, u, P and rho against the experiment: ``D_mass`` (mass
+    conservation) against the fitted D, ``P_momentum`` (rho0 D u) against the
+    measured ``-sigma_xx``, and the von Mises intensity ``sigma_u`` behind the
+    front.  ``reference=False`` (two-phase samples) compares with nothing.
+    """
     ref = None
-    try:
-        ref = hugoniot(mat.name)
-    except InputError:
-        pass
+    if reference:
+        try:
+            ref = hugoniot(mat.name)
+        except InputError:
+            pass
     refD = ref.D(u) / units.km_s if ref else None
     rho0_ref = ref.rho0_g_cm3 if ref else None
     q = {
         "D": Quantity(state.D_fit / units.km_s, "km/s", refD, spread=state.D_fit_err / units.km_s,
-                      note="front position fit"),
+                      note=f"front position fit, rms residual {state.fit_rms / state.width:.3f} slabs"
+                      if np.isfinite(state.width) else "front position fit"),
         "u": Quantity(state.u / units.km_s, "km/s", u / units.km_s, spread=state.u_spread / units.km_s,
                       note="mean particle velocity behind the front vs piston"),
         "P": Quantity(state.P / units.GPa, "GPa",
@@ -195,11 +245,14 @@ def shock_quantities(state, mat, u):
                       spread=state.P_spread / units.GPa, note="-sigma_xx behind the front"),
         "rho": Quantity(state.rho / units.g_cm3, "g/cm3",
                         (ref.density(u) / units.g_cm3) if ref else None,
-                        spread=state.rho_spread / units.g_cm3),
+                        spread=state.rho_spread / units.g_cm3, note="from the Lagrangian compression dx/dX"),
         "D_mass": Quantity(state.D_mass / units.km_s, "km/s", state.D_fit / units.km_s,
-                           note="rho u/(rho - rho0) vs the fitted D"),
+                           spread=state.D_mass_spread / units.km_s,
+                           note="u/(1 - rho0/rho) (mass conservation) vs the fitted D"),
         "P_momentum": Quantity(state.P_momentum / units.GPa, "GPa", state.P / units.GPa,
-                               note="rho0 D u vs the measured -sigma_xx"),
+                               note="rho0 D u (momentum conservation) vs the measured -sigma_xx"),
+        "sigma_u": Quantity(state.sigma_u / units.GPa, "GPa", spread=state.sigma_u_spread / units.GPa,
+                            note="von Mises intensity (CD eq. 4) behind the front"),
     }
     return q, ref
 
@@ -214,7 +267,10 @@ def shock_scene(v, out=None, progress=True, restart=None):
         v = {**v, **{k: (tuple(x) if isinstance(x, list) else x) for k, x in stored.items()}}
     else:
         setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
-                            v["noise"], v["seed"], v["dt_factor"])
+                            v["noise"], v["seed"], v["dt_factor"], attraction=v.get("attraction", "all"),
+                            inclusion=v.get("inclusion"),
+                            inclusion_fraction=v.get("inclusion_fraction", 0.28),
+                            inclusion_diameter=v.get("inclusion_diameter", 56 * units.um))
     writer = None
     files = []
     if out is not None and v["h5md"]:
@@ -244,18 +300,37 @@ def shock_scene(v, out=None, progress=True, restart=None):
     finally:
         if writer is not None:
             writer.close()
-    q, ref = shock_quantities(state, setup.material, setup.u)
+    two = setup.two_phase
+    q, ref = shock_quantities(state, setup.material, setup.u, reference=two is None)
     n = len(setup.atoms)
+    pot = setup.calc.potentials[0]
     notes = list(state.notes)
-    notes.append(f"{n} clusters, {setup.nsteps} steps of {setup.dyn.dt / (setup.calc.potentials[0].r0 / setup.calc.potentials[0].c0):.4f} r0/c0, "
+    notes.append(f"{n} clusters, {setup.nsteps} steps of {setup.dyn.dt / (pot.r0 / pot.c0):.4f} r0/c0, "
                  f"{n * setup.nsteps / max(t_run, 1e-9):.3g} particle-steps/s, "
                  f"{setup.calc.nl.nbuilds} neighbour-list builds")
+    notes.append(f"front fit: rms residual {state.fit_rms / units.um:.3g} um = {state.fit_rms / state.width:.3f} "
+                 f"slabs; D over the two halves of the fit {state.D_halves[0] / units.km_s:.4g}, "
+                 f"{state.D_halves[1] / units.km_s:.4g} km/s")
     if ref is not None:
         notes.append(f"reference: {ref.name} Hugoniot, {ref.source}")
-    res = SceneResult("shock", q, time.perf_counter() - t0, files=files, notes=notes,
-                      extra={"steady": state.steady, "fit_rms_um": state.fit_rms / units.um,
-                             "n_particles": n, "n_steps": setup.nsteps,
-                             "particle_steps_per_s": n * setup.nsteps / max(t_run, 1e-9)})
+    if two is not None:
+        notes.append(f"two-phase: {two['matrix']} matrix with {two['n_spheres']} {two['inclusion']} spheres, "
+                     f"inclusion mass fraction {two['mass_fraction']:.4f} (target {two['mass_fraction_target']:g}), "
+                     f"volume fraction {two['volume_fraction']:.4f}; no experimental reference")
+    extra = {"steady": state.steady, "steady_reasons": list(state.steady_reasons),
+             "fit_rms_um": state.fit_rms / units.um, "fit_rms_slabs": state.fit_rms / state.width,
+             "D_halves_km_s": [h / units.km_s for h in state.D_halves],
+             "mass_check": state.mass_check, "momentum_check": state.momentum_check,
+             "rho_bins_g_cm3": state.rho_bins / units.g_cm3, "rho0_g_cm3": setup.rho0 / units.g_cm3
+             if setup.rho0 else setup.material.rho0 / units.g_cm3,
+             "n_particles": n, "n_steps": setup.nsteps, "particle_steps": n * setup.nsteps,
+             "timestep_r0_c0": setup.dyn.dt / (pot.r0 / pot.c0),
+             "stepping_time_s": t_run,
+             "particle_steps_per_s": n * setup.nsteps / max(t_run, 1e-9)}
+    if two is not None:
+        extra["two_phase"] = {k: v_ for k, v_ in two.items() if k not in ("centres", "diameters")}
+        extra["two_phase"]["rho0"] = two["rho0"] / units.g_cm3
+    res = SceneResult("shock", q, time.perf_counter() - t0, files=files, notes=notes, extra=extra)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         png = out / "shock.png"
