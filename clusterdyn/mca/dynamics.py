@@ -118,7 +118,7 @@ class MCADynamics(MolecularDynamics):
     check_timestep : raise InstabilityError if ``timestep`` exceeds the measured limit
     """
 
-    def __init__(self, atoms, timestep=None, *, damping=0.0, grips=(), contact_every=10,
+    def __init__(self, atoms, timestep=None, *, damping=0.0, grips=(), contact_every=25,
                  check_timestep=True, state=None, trajectory=None, logfile=None, loginterval=1, **kw):
         calc = atoms.calc
         from .calculator import MCA

@@ -26,33 +26,20 @@ from numba import njit
 
 
 @njit(cache=True)
-def _min_image(d, box_c, periodic_c):
-    for a in range(3):
-        if periodic_c[a]:
-            d[a] -= box_c[a] * math.floor(d[a] / box_c[a] + 0.5)
-
-
-@njit(cache=True)
-def _rotate(v, phi, out):
-    """out = R(phi) v, Rodrigues (phi a rotation vector)."""
-    ang = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+def _rot3(vx, vy, vz, px, py, pz):
+    """R(phi) v by Rodrigues (phi a rotation vector); returns a tuple."""
+    ang = math.sqrt(px * px + py * py + pz * pz)
     if ang < 1e-300:
-        out[0] = v[0]
-        out[1] = v[1]
-        out[2] = v[2]
-        return
-    kx = phi[0] / ang
-    ky = phi[1] / ang
-    kz = phi[2] / ang
+        return vx, vy, vz
+    kx = px / ang
+    ky = py / ang
+    kz = pz / ang
     c = math.cos(ang)
     s = math.sin(ang)
-    kv = kx * v[0] + ky * v[1] + kz * v[2]
-    cx = ky * v[2] - kz * v[1]
-    cy = kz * v[0] - kx * v[2]
-    cz = kx * v[1] - ky * v[0]
-    out[0] = v[0] * c + cx * s + kx * kv * (1.0 - c)
-    out[1] = v[1] * c + cy * s + ky * kv * (1.0 - c)
-    out[2] = v[2] * c + cz * s + kz * kv * (1.0 - c)
+    kv = (kx * vx + ky * vy + kz * vz) * (1.0 - c)
+    return (vx * c + (ky * vz - kz * vy) * s + kx * kv,
+            vy * c + (kz * vx - kx * vz) * s + ky * kv,
+            vz * c + (kx * vy - ky * vx) * s + kz * kv)
 
 
 @njit(cache=True)
@@ -61,27 +48,41 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
     """Separation, elongation and tangential increment of every pair since the last commit.
 
     Outputs: ``d_pc`` separation, ``r_p`` distance, ``dr_p = r - r_last``,
-    ``arm_p2`` lever arms (``r`` split as q0: they sum to r, so torques conserve angular momentum), ``dtau_pc`` tangential
-    increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)`` (physics.md 2.4) from the
-    objective relative displacement of the two material points at the contact,
-    ``taurot_p2c`` the stored tangential forces rotated with the pair.
+    ``arm_p2`` lever arms (``r`` split as q0: they sum to r, so torques conserve angular momentum),
+    ``dtau_pc`` tangential increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)``
+    (physics.md 2.4) from the objective relative displacement of the two
+    material points that were at the contact point at the last commit,
+    ``du = d - (a_i R_i + a_j R_j) n_last`` (zero for any rigid motion),
+    ``taurot_p2c`` the stored tangential forces rotated with the pair (minimal
+    rotation n_last -> n, then the mean spin about n).
     """
     npair = i_p.shape[0]
     for p in range(npair):
         i = i_p[p]
         j = j_p[p]
-        d = np.empty(3)
-        for a in range(3):
-            d[a] = pos_nc[j, a] - pos_nc[i, a]
-        _min_image(d, box_c, periodic_c)
-        r = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        rl = math.sqrt(dlast_pc[p, 0] ** 2 + dlast_pc[p, 1] ** 2 + dlast_pc[p, 2] ** 2)
-        nl = np.empty(3)
-        n = np.empty(3)
-        for a in range(3):
-            nl[a] = dlast_pc[p, a] / rl
-            n[a] = d[a] / r
-            d_pc[p, a] = d[a]
+        dx = pos_nc[j, 0] - pos_nc[i, 0]
+        dy = pos_nc[j, 1] - pos_nc[i, 1]
+        dz = pos_nc[j, 2] - pos_nc[i, 2]
+        if periodic_c[0]:
+            dx -= box_c[0] * math.floor(dx / box_c[0] + 0.5)
+        if periodic_c[1]:
+            dy -= box_c[1] * math.floor(dy / box_c[1] + 0.5)
+        if periodic_c[2]:
+            dz -= box_c[2] * math.floor(dz / box_c[2] + 0.5)
+        r = math.sqrt(dx * dx + dy * dy + dz * dz)
+        lx = dlast_pc[p, 0]
+        ly = dlast_pc[p, 1]
+        lz = dlast_pc[p, 2]
+        rl = math.sqrt(lx * lx + ly * ly + lz * lz)
+        nlx = lx / rl
+        nly = ly / rl
+        nlz = lz / rl
+        nx = dx / r
+        ny = dy / r
+        nz = dz / r
+        d_pc[p, 0] = dx
+        d_pc[p, 1] = dy
+        d_pc[p, 2] = dz
         r_p[p] = r
         dr_p[p] = r - rl
         qs = q0_p2[p, 0] + q0_p2[p, 1]
@@ -89,51 +90,43 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
         aj = rl * q0_p2[p, 1] / qs
         arm_p2[p, 0] = r * q0_p2[p, 0] / qs
         arm_p2[p, 1] = r * q0_p2[p, 1] / qs
-        # material points of i and j that were at the contact point at the last commit
-        phi_i = np.empty(3)
-        phi_j = np.empty(3)
-        for a in range(3):
-            phi_i[a] = theta_nc[i, a] - thlast_nc[i, a]
-            phi_j[a] = theta_nc[j, a] - thlast_nc[j, a]
-        ri = np.empty(3)
-        rj = np.empty(3)
-        _rotate(nl, phi_i, ri)
-        _rotate(nl, phi_j, rj)
-        du = np.empty(3)
-        for a in range(3):
-            du[a] = d[a] - ai * ri[a] - aj * rj[a]
-        dun = du[0] * n[0] + du[1] * n[1] + du[2] * n[2]
+        pix = theta_nc[i, 0] - thlast_nc[i, 0]
+        piy = theta_nc[i, 1] - thlast_nc[i, 1]
+        piz = theta_nc[i, 2] - thlast_nc[i, 2]
+        pjx = theta_nc[j, 0] - thlast_nc[j, 0]
+        pjy = theta_nc[j, 1] - thlast_nc[j, 1]
+        pjz = theta_nc[j, 2] - thlast_nc[j, 2]
+        rix, riy, riz = _rot3(nlx, nly, nlz, pix, piy, piz)
+        rjx, rjy, rjz = _rot3(nlx, nly, nlz, pjx, pjy, pjz)
+        ux = dx - ai * rix - aj * rjx
+        uy = dy - ai * riy - aj * rjy
+        uz = dz - ai * riz - aj * rjz
+        un = ux * nx + uy * ny + uz * nz
         gi = G_n[i]
         gj = G_n[j]
         coef = 2.0 * gi * gj / (ai * gj + aj * gi)
-        for a in range(3):
-            dtau_pc[p, a] = coef * (du[a] - dun * n[a])
-        # rotate stored tangential forces: minimal rotation n_last -> n, then twist about n
-        ax = np.empty(3)
-        ax[0] = nl[1] * n[2] - nl[2] * n[1]
-        ax[1] = nl[2] * n[0] - nl[0] * n[2]
-        ax[2] = nl[0] * n[1] - nl[1] * n[0]
-        sn = math.sqrt(ax[0] ** 2 + ax[1] ** 2 + ax[2] ** 2)
-        cs = nl[0] * n[0] + nl[1] * n[1] + nl[2] * n[2]
-        ang = math.atan2(sn, cs)
+        dtau_pc[p, 0] = coef * (ux - un * nx)
+        dtau_pc[p, 1] = coef * (uy - un * ny)
+        dtau_pc[p, 2] = coef * (uz - un * nz)
+        # rotate the stored tangential forces: minimal rotation n_last -> n, then twist about n
+        ax = nly * nz - nlz * ny
+        ay = nlz * nx - nlx * nz
+        az = nlx * ny - nly * nx
+        sn = math.sqrt(ax * ax + ay * ay + az * az)
+        cs = nlx * nx + nly * ny + nlz * nz
         if sn > 0.0:
-            for a in range(3):
-                ax[a] *= ang / sn
-        tw = 0.5 * ((phi_i[0] + phi_j[0]) * n[0] + (phi_i[1] + phi_j[1]) * n[1]
-                    + (phi_i[2] + phi_j[2]) * n[2])
-        tmp = np.empty(3)
-        out = np.empty(3)
-        tw_v = np.empty(3)
-        for a in range(3):
-            tw_v[a] = tw * n[a]
+            f = math.atan2(sn, cs) / sn
+            ax *= f
+            ay *= f
+            az *= f
+        tw = 0.5 * ((pix + pjx) * nx + (piy + pjy) * ny + (piz + pjz) * nz)
         for s in range(2):
-            for a in range(3):
-                tmp[a] = tau_p2c[p, s, a]
-            _rotate(tmp, ax, out)
-            _rotate(out, tw_v, tmp)
-            tn = tmp[0] * n[0] + tmp[1] * n[1] + tmp[2] * n[2]
-            for a in range(3):
-                taurot_p2c[p, s, a] = tmp[a] - tn * n[a]
+            tx, ty, tz = _rot3(tau_p2c[p, s, 0], tau_p2c[p, s, 1], tau_p2c[p, s, 2], ax, ay, az)
+            tx, ty, tz = _rot3(tx, ty, tz, tw * nx, tw * ny, tw * nz)
+            tn = tx * nx + ty * ny + tz * nz
+            taurot_p2c[p, s, 0] = tx - tn * nx
+            taurot_p2c[p, s, 1] = ty - tn * ny
+            taurot_p2c[p, s, 2] = tz - tn * nz
 
 
 @njit(cache=True)

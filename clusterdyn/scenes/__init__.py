@@ -5,7 +5,7 @@ import importlib
 from .base import SCENES, Param, Quantity, Scene, SceneResult, get_scene, register
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact"]
+SCENE_MODULES = ["shock", "plate_impact", "mca"]
 
 
 def _load_all():
