@@ -1,0 +1,35 @@
+"""Brittle fracture: tension peaks at sigma_t (10%) and breaks in two; compression peaks at sigma_c (25%)."""
+
+import numpy as np
+
+from clusterdyn.materials import get_material
+from clusterdyn.mca.experiments import fragments, uniaxial
+
+
+def test_tension_peak_and_two_parts():
+    mat = get_material("alumina")
+    r = uniaxial(mat, "tension", size=(16, 5, 5), steps=3000, scatter=0.02, damping=0.05)  # scene defaults
+    assert abs(r["peak_stress"] / mat.sigma_t - 1) < 0.10
+    parts = fragments(r["dyn"].state)
+    assert np.sum(parts >= 0.05 * len(r["atoms"])) == 2
+    assert r["stress"][-1] < 0.1 * r["peak_stress"]          # it does not carry load any more
+
+
+def test_compression_peak_friction_0p3():
+    mat = get_material("alumina")                             # unlinked pairs: mu = 0.3
+    assert mat.extra["mu"] == 0.3
+    r = uniaxial(mat, "compression", size=(14, 5, 5), steps=2000, scatter=0.02, damping=0.05)
+    assert abs(r["peak_stress"] / mat.sigma_c - 1) < 0.25
+
+
+def test_scene_runs_fast(tmp_path):
+    from clusterdyn.scenes import get_scene
+    res = get_scene("mca-tension").run({"size": "10x4x4", "steps": 1500}, out=tmp_path, progress=False)
+    d = res.as_dict()
+    assert d["peak_stress"]["unit"] == "GPa"
+    assert "rel_error" in d["peak_stress"]
+    assert "tensile_strength" in d
+    assert res.wall_time_s < 60
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"mca-tension-stress-strain.csv", "mca-tension-stress-strain.png",
+            "mca-tension-cracks.png", "result.json"} <= names
