@@ -27,3 +27,6 @@ autodoc_typehints = "none"
 html_theme = "alabaster"
 exclude_patterns = ["_build"]
 nitpicky = False
+# attribute names shared by several classes (rho0, r0, ...) make napoleon's field
+# cross-references ambiguous; Sphinx then picks one and warns
+suppress_warnings = ["ref.python"]
