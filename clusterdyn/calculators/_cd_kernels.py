@@ -1,47 +1,46 @@
 """numba kernels of the Cluster Dynamics pair loop.
 
-Every kernel walks a half Verlet list (clusterdyn.neighbors) in fixed chunks
-of particles; chunk k accumulates into its own buffer ``f_knc[k]`` and the
-buffers are summed in a fixed order, so results are deterministic for a given
-thread count (bit-identical restarts) and no two threads write one row.
+Every kernel walks a half Verlet list over particles held in cell order
+(``clusterdyn.neighbors.NeighborList(sort=True)``: row k is particle
+``perm_n[k]``) in fixed chunks of rows.  Chunk k accumulates into its own
+buffer rows, which cover only the rows its pairs touch (``span_k2[k]``: its
+own rows plus the few cell layers ahead of them), and :func:`reduce_rows`
+sums the buffers of a row in chunk order and scatters the sum to the
+caller's row ``perm_n[i]``.  The chunks depend on the particle count only,
+not on the thread count, so forces are bit-identical on any number of
+threads, and no two threads write one row.
 
-Variants are separate module-level kernels (cached on disk by numba): the
-conservative loop (:func:`cd_forces`), the same loop with per-particle
-energies and virials (:func:`cd_forces_per_particle`) and the fused
-conservative + pair-damping loop of the dynamics (:func:`cd_forces_damped`).
-A run without damping never executes a damping instruction.
+Specialisation: one loop body (:func:`_chunk`) with compile-time flags,
+inlined into small module-level kernels (cached on disk by numba), one per
+variant; LLVM removes the code of every term a variant does not use.
+
+- ``MULTI``: more than one material (type lookups per pair); else the
+  single table ``[0, 0]`` is read with its constants hoisted out of the loop.
+- ``DAMP``: pair damping of CD eq. (6) fused into the loop.
+- ``VIR``: the cell virial (for ``stress``).
+- ``PP``: per-particle energies and virials (``energies``, ``stresses``).
+- ``INIT``: ``attraction="initial"`` (a run-time flag of the multi-material
+  kernels, which also serve single-material runs that use it).
 
 Table layout (potentials.build_tables): ``coef[a, b, k, 0:4]`` cubic
 coefficients of the shifted pair energy in bin k; ``meta[a, b]`` =
 (r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2, E(cutoff), r0_ab^2).
 
-``attraction="initial"`` (physics.md 1.5): with ``initial_only`` set, a pair
-not listed in ``bonds_nk`` (partner ids bonded at set-up, -1 padded, one row
-per particle) only repels: zero force beyond r0_ab and energy
-``E(r) - E(r0_ab)`` inside, so it stays conservative.
+``attraction="initial"`` (physics.md 1.5): a pair not listed in ``bonds_nk``
+(partner ids bonded at set-up, -1 padded, one row per particle, caller's
+order) only repels: zero force beyond r0_ab and energy ``E(r) - E(r0_ab)``
+inside, so it stays conservative.
+
+Outputs per chunk: ``stat_k[k]`` = (energy, smallest r^2/r0_ab^2, its row i,
+its row j, number of pairs closer than the table), ``vir_k6[k]`` = pair
+virial (xx yy zz yz xz xy), eV.
 """
 
-import numba
 import numpy as np
 from numba import njit, prange
 
-
-@njit(inline="always")
-def _table(r, coef, meta, a, b):
-    """(E, f) of the pair law of types (a, b) at r (f > 0 repulsive)."""
-    x = (r - meta[a, b, 0]) * meta[a, b, 1]
-    k = int(x)
-    nb = coef.shape[2]
-    if k >= nb:
-        k = nb - 1
-    t = x - k
-    c0 = coef[a, b, k, 0]
-    c1 = coef[a, b, k, 1]
-    c2 = coef[a, b, k, 2]
-    c3 = coef[a, b, k, 3]
-    e = c0 + t * (c1 + t * (c2 + t * c3))
-    de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
-    return e, -de * meta[a, b, 1]
+#: rows per chunk: the unit of work of a thread and of the summation order
+CHUNK_ROWS = 16384
 
 
 @njit(inline="always")
@@ -57,7 +56,7 @@ def _bonded(bonds_nk, i, jid):
 
 @njit(cache=True)
 def chunk_bounds(first_n, nchunks):
-    """Split particles into nchunks ranges of about equal pair counts."""
+    """Split rows into nchunks ranges of about equal pair counts."""
     n = first_n.shape[0] - 1
     b = np.zeros(nchunks + 1, np.int64)
     total = first_n[n]
@@ -74,273 +73,332 @@ def chunk_bounds(first_n, nchunks):
     return b
 
 
+@njit(cache=True)
+def chunk_layout(first_n, j_p, nchunks):
+    """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist).
+
+    Chunk k owns rows ``bounds_k[k]:bounds_k[k+1]`` and writes rows
+    ``span_k2[k, 0]:span_k2[k, 1]`` into buffer rows starting at ``boff_k[k]``;
+    ``clist[cptr_k[k]:cptr_k[k+1]]`` are the chunks (ascending) whose span meets
+    the rows chunk k owns: the terms of those rows' sums, in order.
+    """
+    bounds = chunk_bounds(first_n, nchunks)
+    nk = nchunks
+    span = np.empty((nk, 2), np.int64)
+    for k in range(nk):
+        lo = bounds[k]
+        hi = bounds[k + 1]
+        for p in range(first_n[bounds[k]], first_n[bounds[k + 1]]):
+            j = j_p[p]
+            if j < lo:
+                lo = j
+            if j + 1 > hi:
+                hi = j + 1
+        span[k, 0] = lo
+        span[k, 1] = hi
+    boff = np.zeros(nk + 1, np.int64)
+    for k in range(nk):
+        boff[k + 1] = boff[k] + span[k, 1] - span[k, 0]
+    cnt = 0
+    for k in range(nk):
+        for kk in range(nk):
+            if span[kk, 0] < bounds[k + 1] and span[kk, 1] > bounds[k]:
+                cnt += 1
+    cptr = np.zeros(nk + 1, np.int64)
+    clist = np.empty(cnt, np.int64)
+    q = 0
+    for k in range(nk):
+        for kk in range(nk):
+            if span[kk, 0] < bounds[k + 1] and span[kk, 1] > bounds[k]:
+                clist[q] = kk
+                q += 1
+        cptr[k + 1] = q
+    return bounds, span, boff, cptr, clist
+
+
 @njit(cache=True, parallel=True)
-def reduce_chunks(f_knc, out_nc):
-    """out = sum over chunks in fixed order (deterministic)."""
-    nk = f_knc.shape[0]
-    n = f_knc.shape[1]
-    for i in prange(n):
-        for c in range(3):
-            s = f_knc[0, i, c]
-            for k in range(1, nk):
-                s += f_knc[k, i, c]
-            out_nc[i, c] = s
+def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc):
+    """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic)."""
+    nk = bounds_k.shape[0] - 1
+    nc = buf_mc.shape[1]
+    for k in prange(nk):
+        q0 = cptr_k[k]
+        q1 = cptr_k[k + 1]
+        for i in range(bounds_k[k], bounds_k[k + 1]):
+            o = perm_n[i]
+            if nc == 3:
+                sx = 0.0
+                sy = 0.0
+                sz = 0.0
+                for q in range(q0, q1):
+                    kk = clist[q]
+                    if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
+                        r = boff_k[kk] + i - span_k2[kk, 0]
+                        sx += buf_mc[r, 0]
+                        sy += buf_mc[r, 1]
+                        sz += buf_mc[r, 2]
+                out_nc[o, 0] = sx
+                out_nc[o, 1] = sy
+                out_nc[o, 2] = sz
+            else:
+                for c in range(nc):
+                    out_nc[o, c] = 0.0
+                for q in range(q0, q1):
+                    kk = clist[q]
+                    if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
+                        r = boff_k[kk] + i - span_k2[kk, 0]
+                        for c in range(nc):
+                            out_nc[o, c] += buf_mc[r, c]
 
 
 @njit(inline="always")
-def _close(stat_k, k, r2n, i, j):
-    # track the smallest r^2/r0_ab^2 of the chunk and its pair
-    if r2n < stat_k[k, 1]:
-        stat_k[k, 1] = r2n
-        stat_k[k, 2] = i
-        stat_k[k, 3] = j
-
-
-@njit(cache=True, parallel=True)
-def cd_forces(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-              f_knc, stat_k, initial_only, bonds_nk, id_n, virial_k6):
-    """Conservative pair forces, total energy and virial.
-
-    Parameters
-    ----------
-    wpos_nc : (N, 3) float64     positions + wrap offsets, Angstrom
-    type_n : (N,) int64          material id
-    first_n, j_p, img_p, image_sc: half Verlet list (CSR)
-    coef, meta : pair tables
-    bounds_k : (K+1,) int64      chunk boundaries over particles
-    f_knc : (K, N, 3) float64    out: per-chunk forces, eV/Angstrom
-    stat_k : (K, 5) float64      out: [energy, min r^2/r0^2, i, j, n_close]
-    initial_only : bool          attraction only between pairs bonded at set-up
-    bonds_nk, id_n : int64       set-up partner ids per particle, particle ids (empty if unused)
-    virial_k6 : (K, 6) float64   out: pair virial sum (xx yy zz yz xz xy), eV
-    """
-    nk = bounds_k.shape[0] - 1
-    for k in prange(nk):
-        f = f_knc[k]
-        f[:, :] = 0.0
-        energy = 0.0
-        vxx = 0.0
-        vyy = 0.0
-        vzz = 0.0
-        vyz = 0.0
-        vxz = 0.0
-        vxy = 0.0
-        stat_k[k, 1] = 1e300
-        stat_k[k, 2] = -1.0
-        stat_k[k, 3] = -1.0
-        nclose = 0
-        for i in range(bounds_k[k], bounds_k[k + 1]):
-            a = type_n[i]
-            xi = wpos_nc[i, 0]
-            yi = wpos_nc[i, 1]
-            zi = wpos_nc[i, 2]
-            fxi = 0.0
-            fyi = 0.0
-            fzi = 0.0
-            for p in range(first_n[i], first_n[i + 1]):
-                j = j_p[p]
-                s = img_p[p]
-                dx = wpos_nc[j, 0] + image_sc[s, 0] - xi
-                dy = wpos_nc[j, 1] + image_sc[s, 1] - yi
-                dz = wpos_nc[j, 2] + image_sc[s, 2] - zi
-                r2 = dx * dx + dy * dy + dz * dz
-                b = type_n[j]
-                if not r2 < meta[a, b, 2]:
-                    continue
-                _close(stat_k, k, r2 * meta[a, b, 4], i, j)
-                if r2 < meta[a, b, 3]:
-                    nclose += 1
-                    continue
-                free = False
-                if initial_only:
-                    free = not _bonded(bonds_nk, i, id_n[j])
-                    if free and r2 >= meta[a, b, 6]:
-                        continue
-                r = np.sqrt(r2)
-                e, fr = _table(r, coef, meta, a, b)
-                if free:
-                    e += meta[a, b, 5]
-                energy += e
-                s_ = fr / r
-                fx = s_ * dx
-                fy = s_ * dy
-                fz = s_ * dz
-                fxi -= fx
-                fyi -= fy
-                fzi -= fz
-                f[j, 0] += fx
-                f[j, 1] += fy
-                f[j, 2] += fz
-                vxx -= fx * dx
-                vyy -= fy * dy
-                vzz -= fz * dz
-                vyz -= fy * dz
-                vxz -= fx * dz
-                vxy -= fx * dy
-            f[i, 0] += fxi
-            f[i, 1] += fyi
-            f[i, 2] += fzi
-        stat_k[k, 0] = energy
-        stat_k[k, 4] = nclose
-        virial_k6[k, 0] = vxx
-        virial_k6[k, 1] = vyy
-        virial_k6[k, 2] = vzz
-        virial_k6[k, 3] = vyz
-        virial_k6[k, 4] = vxz
-        virial_k6[k, 5] = vxy
-
-
-@njit(cache=True, parallel=True)
-def cd_forces_per_particle(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-                           f_knc, stat_k, initial_only, bonds_nk, id_n, virial_k6, e_kn, w_kn6):
-    """:func:`cd_forces` plus per-particle energies ``e_kn`` (eV) and virials ``w_kn6`` (eV).
-
-    Each pair gives half its energy and half its virial to each partner.
-    """
-    nk = bounds_k.shape[0] - 1
-    for k in prange(nk):
-        f = f_knc[k]
-        f[:, :] = 0.0
-        e_n = e_kn[k]
-        e_n[:] = 0.0
-        w = w_kn6[k]
-        w[:, :] = 0.0
-        energy = 0.0
-        stat_k[k, 1] = 1e300
-        stat_k[k, 2] = -1.0
-        stat_k[k, 3] = -1.0
-        nclose = 0
-        for i in range(bounds_k[k], bounds_k[k + 1]):
-            a = type_n[i]
-            for p in range(first_n[i], first_n[i + 1]):
-                j = j_p[p]
-                s = img_p[p]
-                dx = wpos_nc[j, 0] + image_sc[s, 0] - wpos_nc[i, 0]
-                dy = wpos_nc[j, 1] + image_sc[s, 1] - wpos_nc[i, 1]
-                dz = wpos_nc[j, 2] + image_sc[s, 2] - wpos_nc[i, 2]
-                r2 = dx * dx + dy * dy + dz * dz
-                b = type_n[j]
-                if not r2 < meta[a, b, 2]:
-                    continue
-                _close(stat_k, k, r2 * meta[a, b, 4], i, j)
-                if r2 < meta[a, b, 3]:
-                    nclose += 1
-                    continue
-                free = False
-                if initial_only:
-                    free = not _bonded(bonds_nk, i, id_n[j])
-                    if free and r2 >= meta[a, b, 6]:
-                        continue
-                r = np.sqrt(r2)
-                e, fr = _table(r, coef, meta, a, b)
-                if free:
-                    e += meta[a, b, 5]
-                energy += e
-                e_n[i] += 0.5 * e
-                e_n[j] += 0.5 * e
-                s_ = fr / r
-                fx = s_ * dx
-                fy = s_ * dy
-                fz = s_ * dz
-                f[i, 0] -= fx
-                f[i, 1] -= fy
-                f[i, 2] -= fz
-                f[j, 0] += fx
-                f[j, 1] += fy
-                f[j, 2] += fz
-                hxx = -0.5 * fx * dx
-                hyy = -0.5 * fy * dy
-                hzz = -0.5 * fz * dz
-                hyz = -0.5 * fy * dz
-                hxz = -0.5 * fx * dz
-                hxy = -0.5 * fx * dy
-                w[i, 0] += hxx
-                w[i, 1] += hyy
-                w[i, 2] += hzz
-                w[i, 3] += hyz
-                w[i, 4] += hxz
-                w[i, 5] += hxy
-                w[j, 0] += hxx
-                w[j, 1] += hyy
-                w[j, 2] += hzz
-                w[j, 3] += hyz
-                w[j, 4] += hxz
-                w[j, 5] += hxy
-        stat_k[k, 0] = energy
-        stat_k[k, 4] = nclose
-        for c in range(6):
-            virial_k6[k, c] = 0.0
-        for i in range(w.shape[0]):
+def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+           f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+           MULTI, DAMP, VIR, PP, INIT):
+    """The pair loop of chunk k (see the module docstring for the flags)."""
+    off = boff_k[k] - span_k2[k, 0]
+    for r in range(boff_k[k], boff_k[k + 1]):
+        f_mc[r, 0] = 0.0
+        f_mc[r, 1] = 0.0
+        f_mc[r, 2] = 0.0
+        if PP:
+            e_m1[r, 0] = 0.0
             for c in range(6):
-                virial_k6[k, c] += w[i, c]
+                w_m6[r, c] = 0.0
+    nb = coef.shape[2]
+    a = 0
+    b = 0
+    rmin = meta[0, 0, 0]
+    invh = meta[0, 0, 1]
+    cut2 = meta[0, 0, 2]
+    rmin2 = meta[0, 0, 3]
+    eta = 0.0
+    if DAMP:
+        eta = eta_tt[0, 0]
+    energy = 0.0
+    vxx = 0.0
+    vyy = 0.0
+    vzz = 0.0
+    vyz = 0.0
+    vxz = 0.0
+    vxy = 0.0
+    minr2 = 1e300
+    ci = -1
+    cj = -1
+    nclose = 0
+    for i in range(bounds_k[k], bounds_k[k + 1]):
+        if MULTI:
+            a = type_s[i]
+        xi = xs_nc[i, 0]
+        yi = xs_nc[i, 1]
+        zi = xs_nc[i, 2]
+        vxi = 0.0
+        vyi = 0.0
+        vzi = 0.0
+        if DAMP:
+            vxi = vs_nc[i, 0]
+            vyi = vs_nc[i, 1]
+            vzi = vs_nc[i, 2]
+        fxi = 0.0
+        fyi = 0.0
+        fzi = 0.0
+        for p in range(first_n[i], first_n[i + 1]):
+            j = j_p[p]
+            s = img_p[p]
+            dx = xs_nc[j, 0] + image_sc[s, 0] - xi
+            dy = xs_nc[j, 1] + image_sc[s, 1] - yi
+            dz = xs_nc[j, 2] + image_sc[s, 2] - zi
+            r2 = dx * dx + dy * dy + dz * dz
+            if MULTI:
+                b = type_s[j]
+                cut2 = meta[a, b, 2]
+            if not r2 < cut2:
+                continue
+            r2n = r2
+            if MULTI:
+                r2n = r2 * meta[a, b, 4]
+            if r2n < minr2:
+                minr2 = r2n
+                ci = i
+                cj = j
+            if MULTI:
+                rmin2 = meta[a, b, 3]
+            if r2 < rmin2:
+                nclose += 1
+                continue
+            free = False
+            if INIT:
+                free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[j]])
+                if free and r2 >= meta[a, b, 6]:
+                    continue
+            r = np.sqrt(r2)
+            if MULTI:
+                rmin = meta[a, b, 0]
+                invh = meta[a, b, 1]
+            x = (r - rmin) * invh
+            kb = int(x)
+            if kb >= nb:
+                kb = nb - 1
+            t = x - kb
+            c0 = coef[a, b, kb, 0]
+            c1 = coef[a, b, kb, 1]
+            c2 = coef[a, b, kb, 2]
+            c3 = coef[a, b, kb, 3]
+            e = c0 + t * (c1 + t * (c2 + t * c3))
+            de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
+            if INIT:
+                if free:
+                    e += meta[a, b, 5]
+            energy += e
+            s_ = -de * invh / r
+            fx = s_ * dx
+            fy = s_ * dy
+            fz = s_ * dz
+            if VIR or PP:
+                hxx = -fx * dx
+                hyy = -fy * dy
+                hzz = -fz * dz
+                hyz = -fy * dz
+                hxz = -fx * dz
+                hxy = -fx * dy
+                vxx += hxx
+                vyy += hyy
+                vzz += hzz
+                vyz += hyz
+                vxz += hxz
+                vxy += hxy
+                if PP:
+                    ri = off + i
+                    rj = off + j
+                    e_m1[ri, 0] += 0.5 * e
+                    e_m1[rj, 0] += 0.5 * e
+                    w_m6[ri, 0] += 0.5 * hxx
+                    w_m6[ri, 1] += 0.5 * hyy
+                    w_m6[ri, 2] += 0.5 * hzz
+                    w_m6[ri, 3] += 0.5 * hyz
+                    w_m6[ri, 4] += 0.5 * hxz
+                    w_m6[ri, 5] += 0.5 * hxy
+                    w_m6[rj, 0] += 0.5 * hxx
+                    w_m6[rj, 1] += 0.5 * hyy
+                    w_m6[rj, 2] += 0.5 * hzz
+                    w_m6[rj, 3] += 0.5 * hyz
+                    w_m6[rj, 4] += 0.5 * hxz
+                    w_m6[rj, 5] += 0.5 * hxy
+            if DAMP:
+                if MULTI:
+                    eta = eta_tt[a, b]
+                fx += eta * (vxi - vs_nc[j, 0])
+                fy += eta * (vyi - vs_nc[j, 1])
+                fz += eta * (vzi - vs_nc[j, 2])
+            fxi -= fx
+            fyi -= fy
+            fzi -= fz
+            f_mc[off + j, 0] += fx
+            f_mc[off + j, 1] += fy
+            f_mc[off + j, 2] += fz
+        f_mc[off + i, 0] += fxi
+        f_mc[off + i, 1] += fyi
+        f_mc[off + i, 2] += fzi
+    if not MULTI:
+        minr2 *= meta[0, 0, 4]
+    stat_k[k, 0] = energy
+    stat_k[k, 1] = minr2
+    stat_k[k, 2] = ci
+    stat_k[k, 3] = cj
+    stat_k[k, 4] = nclose
+    vir_k6[k, 0] = vxx
+    vir_k6[k, 1] = vyy
+    vir_k6[k, 2] = vzz
+    vir_k6[k, 3] = vyz
+    vir_k6[k, 4] = vxz
+    vir_k6[k, 5] = vxy
+
+
+# -- the variants (arguments: see _chunk; ``initial_only`` is read by the multi kernels only) ----
+
+@njit(cache=True, parallel=True)
+def cd_forces_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+    """One material: forces and energy (the dynamics' undamped step)."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               False, False, False, False, False)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_damped(wpos_nc, type_n, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
-                     f_knc, stat_k, initial_only, bonds_nk, id_n, p_nc, invm_n, eta_tt):
-    """Conservative forces plus the pair damping of CD eq. (6).
+def cd_forces_virial_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+                       boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+                       initial_only):
+    """One material: forces, energy and cell virial."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               False, False, True, False, False)
 
-    Damping on i from j: ``-eta_ab (v_i - v_j)`` with ``v = p/m`` and the
-    opposite on j, for pairs within the cutoff (momentum conserved exactly).
-    ``eta_tt[a, b] = 2 m_a m_b/(m_a + m_b) (Gamma_a + Gamma_b)/2`` (amu/time).
-    """
-    nk = bounds_k.shape[0] - 1
-    for k in prange(nk):
-        f = f_knc[k]
-        f[:, :] = 0.0
-        energy = 0.0
-        stat_k[k, 1] = 1e300
-        stat_k[k, 2] = -1.0
-        stat_k[k, 3] = -1.0
-        nclose = 0
-        for i in range(bounds_k[k], bounds_k[k + 1]):
-            a = type_n[i]
-            xi = wpos_nc[i, 0]
-            yi = wpos_nc[i, 1]
-            zi = wpos_nc[i, 2]
-            vxi = p_nc[i, 0] * invm_n[i]
-            vyi = p_nc[i, 1] * invm_n[i]
-            vzi = p_nc[i, 2] * invm_n[i]
-            fxi = 0.0
-            fyi = 0.0
-            fzi = 0.0
-            for p in range(first_n[i], first_n[i + 1]):
-                j = j_p[p]
-                s = img_p[p]
-                dx = wpos_nc[j, 0] + image_sc[s, 0] - xi
-                dy = wpos_nc[j, 1] + image_sc[s, 1] - yi
-                dz = wpos_nc[j, 2] + image_sc[s, 2] - zi
-                r2 = dx * dx + dy * dy + dz * dz
-                b = type_n[j]
-                if not r2 < meta[a, b, 2]:
-                    continue
-                _close(stat_k, k, r2 * meta[a, b, 4], i, j)
-                if r2 < meta[a, b, 3]:
-                    nclose += 1
-                    continue
-                free = False
-                if initial_only:
-                    free = not _bonded(bonds_nk, i, id_n[j])
-                    if free and r2 >= meta[a, b, 6]:
-                        continue
-                r = np.sqrt(r2)
-                e, fr = _table(r, coef, meta, a, b)
-                if free:
-                    e += meta[a, b, 5]
-                energy += e
-                s_ = fr / r
-                eta = eta_tt[a, b]
-                fx = s_ * dx + eta * (vxi - p_nc[j, 0] * invm_n[j])
-                fy = s_ * dy + eta * (vyi - p_nc[j, 1] * invm_n[j])
-                fz = s_ * dz + eta * (vzi - p_nc[j, 2] * invm_n[j])
-                fxi -= fx
-                fyi -= fy
-                fzi -= fz
-                f[j, 0] += fx
-                f[j, 1] += fy
-                f[j, 2] += fz
-            f[i, 0] += fxi
-            f[i, 1] += fyi
-            f[i, 2] += fzi
-        stat_k[k, 0] = energy
-        stat_k[k, 4] = nclose
+
+@njit(cache=True, parallel=True)
+def cd_forces_damped_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+                       boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+                       initial_only):
+    """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order)."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               False, True, False, False, False)
+
+
+@njit(cache=True, parallel=True)
+def cd_forces_per_particle_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+                             boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk,
+                             id_n, initial_only):
+    """One material: forces, energy, virial and per-particle energies and virials."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               False, False, True, True, False)
+
+
+@njit(cache=True, parallel=True)
+def cd_forces_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+                    f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+    """Several materials (or attraction='initial'): forces, energy and cell virial."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               True, False, True, False, initial_only)
+
+
+@njit(cache=True, parallel=True)
+def cd_forces_damped_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+                           boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+                           initial_only):
+    """Several materials (or attraction='initial'): conservative + pair damping forces."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               True, True, False, False, initial_only)
+
+
+@njit(cache=True, parallel=True)
+def cd_forces_per_particle_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
+                                 span_k2, boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n,
+                                 bonds_nk, id_n, initial_only):
+    """Several materials (or attraction='initial'): with per-particle energies and virials."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               True, False, True, True, initial_only)
+
+
+#: kernel by (multi, mode), mode in "forces", "virial", "damped", "per_particle"
+KERNELS = {
+    (False, "forces"): cd_forces_1,
+    (False, "virial"): cd_forces_virial_1,
+    (False, "damped"): cd_forces_damped_1,
+    (False, "per_particle"): cd_forces_per_particle_1,
+    (True, "forces"): cd_forces_multi,
+    (True, "virial"): cd_forces_multi,
+    (True, "damped"): cd_forces_damped_multi,
+    (True, "per_particle"): cd_forces_per_particle_multi,
+}

@@ -11,7 +11,7 @@ from ..errors import InputError, InstabilityError
 from ..materials import get_material
 from ..neighbors import NeighborList
 from ..potentials import DEFAULT_RC, ClusterPotential, MixedPairPotential, build_tables, check_rc
-from ..parallel import use_threads
+from ..neighbors.celllist import gather_velocities
 from . import _cd_kernels as K
 
 #: arrays besides ASE's own whose change invalidates cached results
@@ -110,6 +110,9 @@ class ClusterDynamics(Calculator):
         self.nl = None
         self.potentials = None
         self.last_stats = None
+        self._buffers = None
+        self._types_key = None
+        self._types_cache = None
 
     # -- set-up ------------------------------------------------------------------
     def set(self, **kwargs):
@@ -159,10 +162,11 @@ class ClusterDynamics(Calculator):
         if not skin >= 0:
             raise InputError("skin", self.parameters.skin, "a multiple of r0 >= 0")
         cutoff = max(t.cutoff for row in self.tables for t in row)
-        self.nl = NeighborList(cutoff, skin * r0min, half=True)
+        self.nl = NeighborList(cutoff, skin * r0min, half=True, sort=True, centered=True)
         self.masses_t = np.array([p.mass for p in self.potentials])
         self._setup_key = key
         self._buffers = None
+        self._types_key = None
 
     def _check_types(self, atoms):
         mid = atoms.arrays.get("material")
@@ -177,64 +181,120 @@ class ClusterDynamics(Calculator):
                              f"ids in 0..{len(self.potentials) - 1}")
         return mid
 
-    def _bufs(self, n, per_particle):
-        nk = use_threads(n)
-        b = self._buffers
-        if b is None or b["n"] != n or b["nk"] != nk:
-            b = {"n": n, "nk": nk, "f_knc": np.empty((nk, n, 3)), "stat_k": np.empty((nk, 5)),
-                 "vir_k6": np.empty((nk, 6)), "f_nc": np.empty((n, 3))}
-            self._buffers = b
-        if per_particle and "e_kn" not in b:
-            b["e_kn"] = np.empty((nk, n))
-            b["w_kn6"] = np.empty((nk, n, 6))
-        return b
+    def _layout(self, n, per_particle, damped):
+        """Chunks and buffers of the current list (recomputed after each rebuild)."""
+        nl = self.nl
+        lay = self._buffers
+        if lay is None or lay["n"] != n:
+            lay = {"n": n, "key": None, "xs": np.empty((n, 3)), "vs": None, "f_m3": np.empty((0, 3)),
+                   "e_m1": self._NO_PP1, "w_m6": self._NO_PP6}
+            self._buffers = lay
+        if lay["key"] != nl.nbuilds:
+            nk = max(1, n // K.CHUNK_ROWS)
+            lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"] = \
+                K.chunk_layout(nl.first_n, nl.j_p, nk)
+            lay["stat_k"] = np.empty((nk, 5))
+            lay["vir_k6"] = np.empty((nk, 6))
+            m = int(lay["boff"][-1])
+            if lay["f_m3"].shape[0] < m:
+                lay["f_m3"] = np.empty((m + m // 8, 3))
+                lay["e_m1"], lay["w_m6"] = self._NO_PP1, self._NO_PP6
+            lay["key"] = nl.nbuilds
+        m = lay["f_m3"].shape[0]
+        if per_particle and lay["e_m1"].shape[0] != m:
+            lay["e_m1"] = np.empty((m, 1))
+            lay["w_m6"] = np.empty((m, 6))
+        if damped and lay["vs"] is None:
+            lay["vs"] = np.empty((n, 3))
+        return lay
+
+    _NO_PP1 = np.zeros((0, 1))
+    _NO_PP6 = np.zeros((0, 6))
+    _NO_V = np.zeros((0, 3))
+    _NO_TYPES = np.zeros(0, np.int64)
 
     # -- the pair loop ---------------------------------------------------------
-    def compute(self, atoms, per_particle=False, damping=None, step=None):
+    def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True):
         """Run the pair loop on ``atoms`` (no copy).  Returns a dict of results.
 
         ``damping = (momenta_nc, invmass_n, eta_tt)`` selects the fused damped
         kernel (used by :class:`clusterdyn.md.DampedVerlet`); its forces include
-        the damping term.  Raises InstabilityError if a pair is closer than the
-        tabulated range.
+        the damping term.  ``out``: an (N, 3) array to receive the forces
+        (default: a new one).  ``virial=False`` skips the cell virial (the
+        dynamics' undamped step).  Raises InstabilityError if a pair is closer
+        than the tabulated range.
+
+        The kernel is chosen per call from what is asked: one material or
+        several (or ``attraction="initial"``), with or without damping, cell
+        virial, per-particle energies and virials; each is a separately
+        compiled loop without the terms it does not use.
         """
         self.setup(atoms)
-        types = self._check_types(atoms)
-        pos = atoms.arrays["positions"]
-        self.nl.update(pos, atoms.cell.array, atoms.pbc)
-        nl = self.nl
-        wpos = pos + nl.offset_nc
         n = len(atoms)
-        b = self._bufs(n, per_particle)
-        bounds = K.chunk_bounds(nl.first_n, b["nk"])
+        pos = atoms.arrays["positions"]
+        nl = self.nl
+        nl.update(pos, atoms.cell.array, atoms.pbc)
         initial, bonds, ids = self._bond_args(atoms)
-        args = (wpos, types, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, bounds,
-                b["f_knc"], b["stat_k"], initial, bonds, ids)
+        multi = len(self.potentials) > 1 or initial
+        types = self._types(atoms, nl.nbuilds)
+        lay = self._layout(n, per_particle, damping is not None)
+        perm = nl.perm_n
+        xs = lay["xs"]
+        nl.sorted_positions(pos, out=xs)
+        types_s = types[perm] if multi else self._NO_TYPES
+        vs, eta = self._NO_V, self._NO_ETA
         if damping is not None:
-            p_nc, invm_n, eta_tt = damping
-            K.cd_forces_damped(*args, p_nc, invm_n, eta_tt)
+            p_nc, invm_n, eta = damping
+            vs = lay["vs"]
+            gather_velocities(p_nc, invm_n, perm, vs)
+            mode = "damped"
         elif per_particle:
-            K.cd_forces_per_particle(*args, b["vir_k6"], b["e_kn"], b["w_kn6"])
+            mode = "per_particle"
+        elif virial:
+            mode = "virial"
         else:
-            K.cd_forces(*args, b["vir_k6"])
-        stat = b["stat_k"]
+            mode = "forces"
+        stat, vir = lay["stat_k"], lay["vir_k6"]
+        K.KERNELS[multi, mode](xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta,
+                               lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta,
+                               lay["e_m1"], lay["w_m6"], perm, bonds, ids, initial)
+        for c in (2, 3):
+            for k in range(stat.shape[0]):
+                if stat[k, c] >= 0:
+                    stat[k, c] = perm[int(stat[k, c])]
         self._check_close(stat, types, step)
-        if b["nk"] == 1:
-            forces = b["f_knc"][0].copy()
-        else:
-            forces = np.empty((n, 3))
-            K.reduce_chunks(b["f_knc"], forces)
-        out = {"forces": forces, "energy": float(stat[:, 0].sum())}
-        if damping is None:
-            out["virial"] = b["vir_k6"].sum(axis=0)
+        forces = np.empty((n, 3)) if out is None else out
+        red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
+        K.reduce_rows(lay["f_m3"], *red, forces)
+        res = {"forces": forces, "energy": float(stat[:, 0].sum())}
+        if mode in ("virial", "per_particle"):
+            res["virial"] = vir.sum(axis=0)
         if per_particle:
-            out["energies"] = b["e_kn"].sum(axis=0)
-            out["virials"] = b["w_kn6"].sum(axis=0)
+            e = np.empty((n, 1))
+            K.reduce_rows(lay["e_m1"], *red, e)
+            res["energies"] = e[:, 0]
+            w = np.empty((n, 6))
+            K.reduce_rows(lay["w_m6"], *red, w)
+            res["virials"] = w
         k = int(np.argmin(stat[:, 1]))
         self.last_stats = {"min_r_over_r0": math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
                            "closest": (int(stat[k, 2]), int(stat[k, 3])), "npairs": nl.npairs,
                            "nbuilds": nl.nbuilds}
-        return out
+        return res
+
+    _NO_ETA = np.zeros((0, 0))
+
+    def _types(self, atoms, key):
+        """Material ids (checked); for one material checked once per list build or new array."""
+        mid = atoms.arrays.get("material")
+        if len(self.potentials) == 1:
+            ck = (key, id(mid), len(atoms))
+            if self._types_key == ck:
+                return self._types_cache
+            t = self._check_types(atoms)
+            self._types_key, self._types_cache = ck, t
+            return t
+        return self._check_types(atoms)
 
     _NO_BONDS = np.zeros((0, 0), np.int64)
     _NO_IDS = np.zeros(0, np.int64)

@@ -128,6 +128,8 @@ class DampedVerlet(MolecularDynamics):
         self.potential_energy = None
         self._eta = calc.damping_matrix(J) if J is not None else None
         self._v2 = None
+        self._fbuf = None
+        self._fturn = 0
         self.timings = {"forces": 0.0, "integrate": 0.0}
 
     def todict(self):
@@ -148,7 +150,13 @@ class DampedVerlet(MolecularDynamics):
             damping = None
             if self._eta is not None:
                 damping = (atoms.arrays["momenta"], self._invm_n, self._eta)
-            out = self.calc.compute(atoms, damping=damping, step=self.nsteps)
+            # two force buffers taking turns: the forces of the previous step stay valid
+            n = len(atoms)
+            if self._fbuf is None or self._fbuf[0].shape[0] != n:
+                self._fbuf = [np.empty((n, 3)), np.empty((n, 3))]
+            self._fturn ^= 1
+            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn],
+                                    virial=False)
             forces = out["forces"]
             self.potential_energy = out["energy"]
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:

@@ -14,7 +14,14 @@ Cartesian lattice translations.  A half list stores every unordered pair once
 cutoff); a full list stores both directions.
 
 The list is rebuilt when any particle has moved more than ``skin/2`` since
-the last build, or when the cell or pbc changed.
+the last build (or, with ``centered=True``, when in addition the spread of
+the displacements exceeds it), or when the cell or pbc changed.
+
+With ``sort=True`` (the Cluster Dynamics calculator's list) the particles are
+held in cell order: row k of the list is particle ``perm_n[k]``, positions
+are gathered into that order every step (:func:`gather_positions`) and the
+half list is built in a single pass over the own cell and the 13 forward
+cells of the 3x3x3 stencil.  The caller's arrays are never reordered.
 """
 
 import math
@@ -157,6 +164,233 @@ def _max_disp2(pos_nc, ref_nc):
     return m.max() if n > 0 else 0.0
 
 
+# -- sorted lists (cell order, half stencil, single pass) ----------------------------------------
+
+@njit(cache=True)
+def _wrap(pos_nc, box_c, periodic_c, wpos_nc):
+    n = pos_nc.shape[0]
+    for i in range(n):
+        for d in range(3):
+            x = pos_nc[i, d]
+            if periodic_c[d]:
+                x -= math.floor(x / box_c[d]) * box_c[d]
+                if x >= box_c[d]:
+                    x -= box_c[d]
+            wpos_nc[i, d] = x
+
+
+@njit(cache=True)
+def _sort_by_cell(wpos_nc, pos_nc, lo_c, inv_cs_c, ncell_c, axes, xs_nc, offs_nc, cell_s):
+    """Counting sort of the particles by cell (axes[0] slowest); stable in the original order.
+
+    Returns (perm, start): sorted row k holds particle perm[k]; cell c holds rows start[c]..start[c+1].
+    Fills the sorted wrapped positions ``xs_nc``, wrap offsets ``offs_nc`` and cells ``cell_s``.
+    """
+    n = wpos_nc.shape[0]
+    a0, a1, a2 = axes[0], axes[1], axes[2]
+    n0, n1, n2 = ncell_c[a0], ncell_c[a1], ncell_c[a2]
+    ncell = n0 * n1 * n2
+    cell_n = np.empty(n, np.int64)
+    count = np.zeros(ncell + 1, np.int64)
+    for i in range(n):
+        k0 = int(math.floor((wpos_nc[i, a0] - lo_c[a0]) * inv_cs_c[a0]))
+        k1 = int(math.floor((wpos_nc[i, a1] - lo_c[a1]) * inv_cs_c[a1]))
+        k2 = int(math.floor((wpos_nc[i, a2] - lo_c[a2]) * inv_cs_c[a2]))
+        k0 = min(max(k0, 0), n0 - 1)
+        k1 = min(max(k1, 0), n1 - 1)
+        k2 = min(max(k2, 0), n2 - 1)
+        c = (k0 * n1 + k1) * n2 + k2
+        cell_n[i] = c
+        count[c + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    start = count.copy()
+    fill = count[:-1].copy()
+    perm = np.empty(n, np.int64)
+    for i in range(n):
+        c = cell_n[i]
+        k = fill[c]
+        fill[c] += 1
+        perm[k] = i
+        cell_s[k] = c
+        for d in range(3):
+            xs_nc[k, d] = wpos_nc[i, d]
+            offs_nc[k, d] = wpos_nc[i, d] - pos_nc[i, d]
+    return perm, start
+
+
+@njit(cache=True, parallel=True)
+def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, slotmult_s,
+                       rcut2, cap, nbr_nk, img_nk, cnt_n):
+    """Half list over sorted particles in one pass: own cell (j > i) + 13 forward cells.
+
+    Cells are indexed in "slot" order (slot 0 slowest); ``nslot``/``periodic_s`` are
+    the cell counts and periodicity per slot, ``slotbox_s3`` the Cartesian box
+    vector of each slot's axis and ``slotmult_s`` its weight in the 3x3x3 image
+    code.  Valid when every periodic slot has >= 3 cells of size >= the cut-off.
+    The loop runs over cell pairs (the stencil set-up is paid once per cell, not
+    per particle); row i gets its partners in stencil order in
+    ``nbr_nk[i, :cnt_n[i]]``.  cnt_n may exceed cap (the maximum is returned),
+    then the caller retries with a larger cap.
+    """
+    m0 = nslot[0]
+    m1 = nslot[1]
+    m2 = nslot[2]
+    ns = stencil_s3.shape[0]
+    for c in prange(m0 * m1 * m2):
+        a0 = start[c]
+        a1 = start[c + 1]
+        if a1 == a0:
+            continue
+        for i in range(a0, a1):
+            cnt_n[i] = 0
+        g2 = c % m2
+        g1 = (c // m2) % m1
+        g0 = c // (m2 * m1)
+        for s in range(ns):
+            h0 = g0 + stencil_s3[s, 0]
+            h1 = g1 + stencil_s3[s, 1]
+            h2 = g2 + stencil_s3[s, 2]
+            i0 = 0
+            i1 = 0
+            i2 = 0
+            if h0 < 0 or h0 >= m0:
+                if not periodic_s[0]:
+                    continue
+                i0 = -1 if h0 < 0 else 1
+                h0 -= i0 * m0
+            if h1 < 0 or h1 >= m1:
+                if not periodic_s[1]:
+                    continue
+                i1 = -1 if h1 < 0 else 1
+                h1 -= i1 * m1
+            if h2 < 0 or h2 >= m2:
+                if not periodic_s[2]:
+                    continue
+                i2 = -1 if h2 < 0 else 1
+                h2 -= i2 * m2
+            cc = (h0 * m1 + h1) * m2 + h2
+            b0 = start[cc]
+            b1 = start[cc + 1]
+            if b1 == b0:
+                continue
+            sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + i2 * slotbox_s3[2, 0]
+            sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + i2 * slotbox_s3[2, 1]
+            sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + i2 * slotbox_s3[2, 2]
+            code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + i2 * slotmult_s[2]
+            for i in range(a0, a1):
+                xi = xs_nc[i, 0] - sx
+                yi = xs_nc[i, 1] - sy
+                zi = xs_nc[i, 2] - sz
+                cnt = cnt_n[i]
+                q0 = b0
+                if s == 0:
+                    q0 = i + 1
+                for j in range(q0, b1):
+                    dx = xs_nc[j, 0] - xi
+                    dy = xs_nc[j, 1] - yi
+                    dz = xs_nc[j, 2] - zi
+                    if dx * dx + dy * dy + dz * dz < rcut2:
+                        if cnt < cap:
+                            nbr_nk[i, cnt] = j
+                            img_nk[i, cnt] = code
+                        cnt += 1
+                cnt_n[i] = cnt
+    m = 0
+    for i in range(cnt_n.shape[0]):
+        m = max(m, cnt_n[i])
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _compact(nbr_nk, img_nk, cnt_n, first_n, j_p, img_p):
+    n = cnt_n.shape[0]
+    for i in prange(n):
+        p = first_n[i]
+        for q in range(cnt_n[i]):
+            j_p[p + q] = nbr_nk[i, q]
+            img_p[p + q] = img_nk[i, q]
+
+
+@njit(cache=True, parallel=True)
+def gather_positions(pos_nc, perm, offs_nc, xs_nc):
+    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels."""
+    for k in prange(perm.shape[0]):
+        i = perm[k]
+        xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
+        xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
+        xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
+
+
+@njit(cache=True, parallel=True)
+def gather_velocities(p_nc, invm_n, perm, vs_nc):
+    """vs[k] = p[perm[k]] / m[perm[k]]."""
+    for k in prange(perm.shape[0]):
+        i = perm[k]
+        w = invm_n[i]
+        vs_nc[k, 0] = p_nc[i, 0] * w
+        vs_nc[k, 1] = p_nc[i, 1] * w
+        vs_nc[k, 2] = p_nc[i, 2] * w
+
+
+@njit(cache=True, parallel=True)
+def _displacement(pos_nc, ref_nc, out2):
+    """(max |d|^2, squared half-diagonal of the bounding box of the displacements d).
+
+    Every pair's separation changed by at most 2 min(max|d|, max|d - c|) for any
+    vector c; the bounding-box centre gives max|d - c| <= half-diagonal.  A
+    block moving as a whole (material behind a shock front) therefore costs no
+    rebuilds of its own.
+    """
+    n = pos_nc.shape[0]
+    nt = out2.shape[0]
+    for t in prange(nt):
+        a = t * n // nt
+        b = (t + 1) * n // nt
+        m = 0.0
+        lx = 1e300
+        ly = 1e300
+        lz = 1e300
+        hx = -1e300
+        hy = -1e300
+        hz = -1e300
+        for i in range(a, b):
+            dx = pos_nc[i, 0] - ref_nc[i, 0]
+            dy = pos_nc[i, 1] - ref_nc[i, 1]
+            dz = pos_nc[i, 2] - ref_nc[i, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            if r2 != r2:
+                m = np.inf
+            m = max(m, r2)
+            lx = min(lx, dx)
+            hx = max(hx, dx)
+            ly = min(ly, dy)
+            hy = max(hy, dy)
+            lz = min(lz, dz)
+            hz = max(hz, dz)
+        out2[t, 0] = m
+        out2[t, 1] = lx
+        out2[t, 2] = ly
+        out2[t, 3] = lz
+        out2[t, 4] = hx
+        out2[t, 5] = hy
+        out2[t, 6] = hz
+    m = 0.0
+    lo = np.full(3, 1e300)
+    hi = np.full(3, -1e300)
+    for t in range(nt):
+        m = max(m, out2[t, 0])
+        for d in range(3):
+            lo[d] = min(lo[d], out2[t, 1 + d])
+            hi[d] = max(hi[d], out2[t, 4 + d])
+    h2 = 0.0
+    for d in range(3):
+        h2 += 0.25 * (hi[d] - lo[d]) ** 2
+    if m == np.inf:
+        h2 = np.inf
+    return m, h2
+
+
 def check_cell(cell, pbc):
     """Return (box lengths, periodic flags) of an open or periodic orthorhombic cell.
 
@@ -178,6 +412,11 @@ def check_cell(cell, pbc):
     return np.diag(cell).copy(), pbc
 
 
+#: forward half of the 3x3x3 cell stencil (own cell first), in slot order
+HALF_STENCIL = np.array([[0, 0, 0]] + [[a, b, c] for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
+                                       if (a, b, c) > (0, 0, 0)], dtype=np.int64)
+
+
 class NeighborList:
     """Verlet list with skin, built on a cell list (numba).
 
@@ -186,23 +425,42 @@ class NeighborList:
     cutoff : float
         Interaction cutoff, Angstrom (largest over pair types).
     skin : float, default 0
-        Extra radius; the list stays valid until a particle moved skin/2.
+        Extra radius; the list stays valid while no pair separation can have
+        changed by more than ``skin``.
     half : bool, default True
         Store each unordered pair once (``True``) or both directions.
+    sort : bool, default False
+        Hold the particles in cell order (:attr:`perm_n`): the list, the wrap
+        offsets and the kernels' positions are over sorted rows, so a pair
+        loop reads memory nearly in sequence.  The Atoms are never reordered;
+        :meth:`pairs` and :attr:`offset_nc` answer in the caller's order.  A
+        sorted half list on a grid with >= 3 cells along every periodic axis is
+        built in one pass over the own cell and 13 forward cells.
+    centered : bool, default False
+        Rebuild test.  False: when a particle moved more than ``skin/2`` since
+        the last build.  True: when both that and the half-diagonal of the
+        bounding box of all displacements exceed ``skin/2`` (any common
+        translation is subtracted, so a block moving as a whole, e.g. the
+        material behind a shock front, triggers no rebuild of its own).  Both
+        are rigorous: no pair closer than the cutoff is ever missing.
 
     Attributes
     ----------
     first_n : (N+1,) int64, j_p : (P,) int32, img_p : (P,) int16
-        CSR pair list (see module docstring).
+        CSR pair list (see module docstring); over sorted rows when ``sort``.
+    perm_n : (N,) int64 or None
+        With ``sort``: sorted row k is particle ``perm_n[k]``.
+    offs_nc : (N, 3) float64
+        With ``sort``: wrap offsets of the sorted rows.
     offset_nc : (N, 3) float64
-        Wrap of each particle into the box at the last build.
+        Wrap of each particle into the box at the last build (caller's order).
     image_sc : (S, 3) float64
         Cartesian lattice translations indexed by ``img_p``.
     nbuilds : int
         Number of builds so far.
     """
 
-    def __init__(self, cutoff, skin=0.0, half=True):
+    def __init__(self, cutoff, skin=0.0, half=True, sort=False, centered=False):
         if not (float(cutoff) > 0):
             raise InputError("cutoff", cutoff, "a positive distance")
         if not (float(skin) >= 0):
@@ -210,40 +468,50 @@ class NeighborList:
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.half = bool(half)
+        self.sort = bool(sort)
+        self.centered = bool(centered)
         self.nbuilds = 0
         self.ref_nc = None
+        self.perm_n = None
         self._cell = None
         self._pbc = None
+        self._cap = 0
+        self._disp = np.zeros((64, 7))
 
     def update(self, positions, cell, pbc):
         """Rebuild if needed; return True when rebuilt."""
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         cell = np.asarray(cell, dtype=float).reshape(3, 3)
-        pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).copy()
+        pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,))
         use_threads(pos.shape[0])
         if (self.ref_nc is None or self.ref_nc.shape != pos.shape
                 or not np.array_equal(cell, self._cell) or not np.array_equal(pbc, self._pbc)
-                or (pos.shape[0] and _max_disp2(pos, self.ref_nc) > (0.5 * self.skin) ** 2)):
+                or (pos.shape[0] and self._moved(pos))):
             self.build(pos, cell, pbc)
             return True
         return False
 
-    def build(self, positions, cell, pbc):
-        pos = np.ascontiguousarray(positions, dtype=np.float64)
+    def _moved(self, pos):
+        lim = (0.5 * self.skin) ** 2
+        if not self.centered:
+            m = _max_disp2(pos, self.ref_nc)
+            return not m <= lim
+        m, h2 = _displacement(pos, self.ref_nc, self._disp)
+        return not (m <= lim or h2 <= lim)
+
+    def _grid(self, pos, cell, pbc):
         box_c, periodic_c = check_cell(cell, pbc)
         n = pos.shape[0]
         if not np.all(np.isfinite(pos)):
             bad = np.nonzero(~np.isfinite(pos).all(axis=1))[0]
             raise InputError("positions", f"non-finite at particles {bad[:5].tolist()}", "finite values")
         rcut = self.cutoff + self.skin
-        wpos = pos.copy()
+        wpos = np.empty_like(pos)
+        _wrap(pos, box_c, periodic_c, wpos)
         lo = np.zeros(3)
         ext = np.zeros(3)
         for d in range(3):
             if periodic_c[d]:
-                wpos[:, d] -= np.floor(pos[:, d] / box_c[d]) * box_c[d]
-                # guard the rare x == L after rounding
-                wpos[wpos[:, d] >= box_c[d], d] -= box_c[d]
                 ext[d] = box_c[d]
             elif n:
                 lo[d] = pos[:, d].min()
@@ -264,12 +532,35 @@ class NeighborList:
             krange[d] = max(1, int(math.ceil(rcut / cs[d] - 1e-12)))
             if not periodic_c[d]:
                 krange[d] = 1
-        inv_cs = 1.0 / cs
-        cell_n, start, order = _bin_particles(wpos, lo, inv_cs, ncell)
+        box = np.where(periodic_c, box_c, 0.0)
+        return wpos, lo, cs, ncell, krange, periodic_c, box, rcut
+
+    def build(self, positions, cell, pbc):
+        pos = np.ascontiguousarray(positions, dtype=np.float64)
+        wpos, lo, cs, ncell, krange, periodic_c, box, rcut = self._grid(pos, cell, pbc)
+        if self.sort:
+            self._build_sorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
+        else:
+            self._build_unsorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
+        self.ref_nc = pos.copy()
+        self._cell = np.array(cell, dtype=float).reshape(3, 3)
+        self._pbc = periodic_c.copy()
+        self.nbuilds += 1
+
+    def _image_table(self, krange, box):
+        kx, ky, kz = krange
+        ii = np.arange(-kx, kx + 1)
+        jj = np.arange(-ky, ky + 1)
+        ll = np.arange(-kz, kz + 1)
+        img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
+        return np.ascontiguousarray(img * box[None, :])
+
+    def _build_unsorted(self, pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut):
+        n = pos.shape[0]
+        cell_n, start, order = _bin_particles(wpos, lo, 1.0 / cs, ncell)
         first_n = np.zeros(n + 1, np.int64)
         dummy_j = np.empty(0, np.int32)
         dummy_i = np.empty(0, np.int16)
-        box = np.where(periodic_c, box_c, 0.0)
         _search(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
                 self.half, True, first_n, dummy_j, dummy_i)
         np.cumsum(first_n, out=first_n)
@@ -278,28 +569,101 @@ class NeighborList:
         img_p = np.empty(npairs, np.int16)
         _search(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
                 self.half, False, first_n, j_p, img_p)
-        kx, ky, kz = krange
-        ii = np.arange(-kx, kx + 1)
-        jj = np.arange(-ky, ky + 1)
-        ll = np.arange(-kz, kz + 1)
-        img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
-        self.image_sc = np.ascontiguousarray(img * box[None, :])
+        self.image_sc = self._image_table(krange, box)
         self.first_n, self.j_p, self.img_p = first_n, j_p, img_p
-        self.offset_nc = wpos - pos
-        self.ref_nc = pos.copy()
-        self._cell = np.array(cell, dtype=float).reshape(3, 3)
-        self._pbc = periodic_c.copy()
-        self.nbuilds += 1
+        self.perm_n = None
+        self._offset_nc = wpos - pos
+
+    def _build_sorted(self, pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut):
+        n = pos.shape[0]
+        # slowest-varying cell axis: the one with most cells (thinnest layers, so a
+        # contiguous block of rows touches few rows outside itself)
+        axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
+        xs = np.empty((n, 3))
+        offs = np.empty((n, 3))
+        cell_s = np.empty(n, np.int64)
+        perm, start = _sort_by_cell(wpos, pos, lo, 1.0 / cs, ncell, axes, xs, offs, cell_s)
+        fast = self.half and np.all(krange == 1) and all(ncell[d] >= 3 for d in range(3) if periodic_c[d])
+        if fast:
+            nslot = ncell[axes]
+            periodic_s = periodic_c[axes].copy()
+            slotbox = np.zeros((3, 3))
+            for q, d in enumerate(axes):
+                slotbox[q, d] = box[d]
+            slotmult = np.array([9, 3, 1], np.int64)[axes]
+            cap = self._cap or 16
+            while True:
+                nbr = np.empty((n, cap), np.int32)
+                img = np.empty((n, cap), np.int16)
+                cnt = np.empty(n, np.int64)
+                m = _fill_half_stencil(xs, start, nslot, periodic_s, HALF_STENCIL, slotbox,
+                                       slotmult, rcut * rcut, cap, nbr, img, cnt)
+                if m <= cap:
+                    break
+                cap = int(m * 1.25) + 4
+            self._cap = cap
+            first_n = np.zeros(n + 1, np.int64)
+            np.cumsum(cnt, out=first_n[1:])
+            npairs = int(first_n[-1])
+            j_p = np.empty(npairs, np.int32)
+            img_p = np.empty(npairs, np.int16)
+            _compact(nbr, img, cnt, first_n, j_p, img_p)
+            del nbr, img
+            self.image_sc = self._image_table(np.ones(3, np.int64), box)
+        else:
+            first_n = np.zeros(n + 1, np.int64)
+            dummy_j = np.empty(0, np.int32)
+            dummy_i = np.empty(0, np.int16)
+            # _search decodes cells with x slowest: re-bin the sorted rows that way
+            cell_x, start_x, order_x = _bin_particles(xs, lo, 1.0 / cs, ncell)
+            _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
+                    self.half, True, first_n, dummy_j, dummy_i)
+            np.cumsum(first_n, out=first_n)
+            npairs = int(first_n[-1])
+            j_p = np.empty(npairs, np.int32)
+            img_p = np.empty(npairs, np.int16)
+            _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
+                    self.half, False, first_n, j_p, img_p)
+            self.image_sc = self._image_table(krange, box)
+        self.first_n, self.j_p, self.img_p = first_n, j_p, img_p
+        self.perm_n = perm
+        self.offs_nc = offs
+        self._offset_nc = None
+
+    @property
+    def offset_nc(self):
+        """Wrap offsets at the last build, in the caller's particle order."""
+        if self.perm_n is None:
+            return self._offset_nc
+        off = np.empty_like(self.offs_nc)
+        off[self.perm_n] = self.offs_nc
+        return off
 
     @property
     def npairs(self):
         return int(self.first_n[-1])
 
+    def sorted_positions(self, positions, out=None):
+        """Wrapped positions in the list's row order (sorted lists), Angstrom."""
+        pos = np.ascontiguousarray(positions, dtype=np.float64)
+        if self.perm_n is None:
+            return pos + self._offset_nc
+        if out is None:
+            out = np.empty_like(pos)
+        gather_positions(pos, self.perm_n, self.offs_nc, out)
+        return out
+
     def pairs(self, positions):
-        """Python-side view: (i_p, j_p, d_pc, r_p) for the given positions (tests, analysis)."""
+        """Python-side view: (i_p, j_p, d_pc, r_p) for the given positions (tests, analysis).
+
+        Indices are the caller's particle rows, also for a sorted list.
+        """
         pos = np.asarray(positions, dtype=float)
         i_p = np.repeat(np.arange(len(pos)), np.diff(self.first_n))
         j_p = self.j_p.astype(np.int64)
-        w = pos + self.offset_nc
+        w = self.sorted_positions(pos)
         d = w[j_p] - w[i_p] + self.image_sc[self.img_p]
+        if self.perm_n is not None:
+            i_p = self.perm_n[i_p]
+            j_p = self.perm_n[j_p]
         return i_p, j_p, d, np.sqrt((d * d).sum(axis=1))
