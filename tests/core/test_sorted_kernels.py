@@ -1,0 +1,107 @@
+"""The calculator's sorted neighbour list and chunked kernels: brute force, thread-count independence."""
+
+import numpy as np
+import pytest
+
+from clusterdyn import units
+from clusterdyn.build import fcc_packing
+from clusterdyn.neighbors import NeighborList
+from clusterdyn.parallel import set_max_threads
+from clusterdyn.scenes.shock import build_shock
+
+from .test_neighbors import brute_force, full_from_half, listed
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_sorted_lists_against_brute_force(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(2, 300))
+    L = rng.uniform(1.0, 9.0, 3)
+    pbc = rng.random(3) < 0.5
+    rc = rng.uniform(0.4, 2.5)
+    pos = rng.uniform(0, 1, (n, 3)) * L
+    pos[: n // 4] = np.round(pos[: n // 4] / L * 3) / 3 * L
+    ref = brute_force(pos, L, pbc, rc)
+    skin = rng.uniform(0, 0.5)
+    full = NeighborList(rc, skin, half=False, sort=True)
+    full.build(pos, np.diag(L), pbc)
+    assert listed(full, pos, rc) == ref
+    half = NeighborList(rc, skin, half=True, sort=True, centered=True)
+    half.build(pos, np.diag(L), pbc)
+    s, npairs = full_from_half(half, pos, rc)
+    assert s == ref and 2 * npairs == len(ref)
+    # a common translation larger than the skin plus small noise: the centred test keeps the list
+    shift = rng.normal(size=3)
+    shift *= 3 * skin / np.linalg.norm(shift)
+    pos2 = pos + shift + rng.uniform(-0.05, 0.05, pos.shape) * skin
+    half.update(pos2, np.diag(L), pbc)
+    w = np.where(pbc, pos2 % L, pos2)
+    assert full_from_half(half, pos2, rc)[0] == brute_force(w, L, pbc, rc)
+
+
+@pytest.mark.parametrize("pbc", [(True, True, True), (False, True, True)])
+def test_sorted_half_stencil_on_lattices(pbc):
+    for size in [(3, 3, 3), (5, 4, 3), (8, 3, 4)]:
+        atoms = fcc_packing("Al", 1.0, size=size, pbc=pbc)
+        L = np.diag(atoms.cell.array)
+        nl = NeighborList(1.15, 0.2, half=True, sort=True, centered=True)
+        nl.build(atoms.positions, atoms.cell.array, pbc)
+        assert full_from_half(nl, atoms.positions, 1.15)[0] == brute_force(atoms.positions, L, pbc, 1.15)
+
+
+def test_centered_rebuild_ignores_a_moving_block():
+    atoms = fcc_packing("Al", 1.0, size=(4, 4, 4), pbc=(False, True, True))
+    nl = NeighborList(1.15, 0.2, sort=True, centered=True)
+    nl.update(atoms.positions, atoms.cell.array, atoms.pbc)
+    pos = atoms.positions + [0.15, 0.0, 0.0]              # > skin/2, all together
+    assert not nl.update(pos, atoms.cell.array, atoms.pbc)
+    pos[0] += [0.0, 0.21, 0.0]                            # spread > skin
+    assert nl.update(pos, atoms.cell.array, atoms.pbc)
+
+
+def test_forces_bit_identical_on_one_and_two_threads():
+    """Chunks depend on N only: the same sums in the same order on any thread count."""
+    s = build_shock(size=(32, 16, 16), u=3 * units.km_s, J=50, seed=3)    # 32768: two chunks
+    a, c = s.atoms, s.calc
+    rng = np.random.default_rng(0)
+    a.positions = a.positions + rng.normal(0, 0.02 * 5 * units.um, a.positions.shape)
+    damping = (a.arrays["momenta"], 1.0 / a.get_masses(), c.damping_matrix(50.0))
+    try:
+        set_max_threads(1)
+        f1 = c.compute(a, damping=damping)["forces"]
+        p1 = c.compute(a, per_particle=True)
+        set_max_threads(2 if __import__("numba").config.NUMBA_NUM_THREADS >= 2 else 1)
+        f2 = c.compute(a, damping=damping)["forces"]
+        p2 = c.compute(a, per_particle=True)
+    finally:
+        set_max_threads(None)
+    assert np.array_equal(f1, f2)
+    assert np.array_equal(p1["forces"], p2["forces"]) and np.array_equal(p1["virials"], p2["virials"])
+    assert p1["energy"] == p2["energy"]
+    assert len(c._buffers["bounds"]) - 1 == 2
+
+
+def test_sorted_kernels_match_a_direct_pair_sum():
+    s = build_shock(size=(10, 3, 3), u=3 * units.km_s, J=50, seed=7)
+    s.dyn.run(120)
+    a, c = s.atoms, s.calc
+    out = c.compute(a, per_particle=True)
+    nl = NeighborList(c.nl.cutoff, 0.0, half=True)
+    nl.build(a.positions, a.cell.array, a.pbc)
+    i, j, d, r = nl.pairs(a.positions)
+    t = c.tables[0][0]
+    k = r < t.cutoff
+    i, j, d, r = i[k], j[k], d[k], r[k]
+    e, f = t.evaluate(r)
+    fv = (f / r)[:, None] * d
+    F = np.zeros((len(a), 3))
+    np.add.at(F, i, -fv)
+    np.add.at(F, j, fv)
+    scale = np.abs(F).max()
+    assert np.abs(out["forces"] - F).max() < 1e-10 * scale
+    assert np.isclose(out["energy"], e.sum(), rtol=1e-12)
+    En = np.zeros(len(a))
+    np.add.at(En, i, 0.5 * e)
+    np.add.at(En, j, 0.5 * e)
+    assert np.allclose(out["energies"], En, rtol=1e-10, atol=1e-12 * np.abs(En).max())
+    assert np.allclose(out["virials"].sum(axis=0), out["virial"], rtol=1e-10)

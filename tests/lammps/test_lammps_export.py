@@ -1,0 +1,157 @@
+"""LAMMPS export without LAMMPS: data file, tables, input script, CLI, the damping force law."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from clusterdyn import units
+from clusterdyn.cli import main as cli_main
+from clusterdyn.io.lammps import (export_lammps, lammps_table_forces, read_dump, table_grid,
+                                  table_interpolation_error, _parse_log, _ranges)
+from clusterdyn.scenes.shock import build_shock
+
+NPTS = 2001
+
+
+@pytest.fixture(scope="module")
+def shock():
+    s = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=50, seed=2)
+    s.dyn.run(40)
+    return s
+
+
+@pytest.fixture(scope="module")
+def deck(shock, tmp_path_factory):
+    d = tmp_path_factory.mktemp("deck")
+    export_lammps(shock.atoms, shock.calc, shock.dyn, d, nsteps=30, frames=3, n_points=NPTS)
+    return d
+
+
+def read_table(path, name):
+    lines = path.read_text().split("\n")
+    k = lines.index(name)
+    head = lines[k + 1].split()
+    n = int(head[1])
+    rows = np.array([[float(x) for x in ln.split()] for ln in lines[k + 3:k + 3 + n]])
+    return head, rows
+
+
+def test_table_on_lammps_rsq_grid(shock, deck):
+    head, rows = read_table(deck / "cd.table", "CD_1_1")
+    t = shock.calc.tables[0][0]
+    assert head[0] == "N" and int(head[1]) == NPTS and head[2] == "RSQ"
+    r_lo, r_hi = float(head[3]), float(head[4])
+    assert r_lo == t.r_min and r_hi == t.cutoff          # exact: LAMMPS' 'match' needs rhi == cutoff
+    assert np.array_equal(rows[:, 0], np.arange(1, NPTS + 1))
+    assert np.array_equal(rows[:, 1], table_grid(r_lo, r_hi, NPTS))
+    e, f = t.evaluate(rows[:-1, 1])
+    assert np.array_equal(rows[:-1, 2], e) and np.array_equal(rows[:-1, 3], f)
+    assert rows[-1, 2] == 0.0 and rows[-1, 3] == t.f_cut  # shifted energy vanishes at the cutoff
+
+
+def test_interpolation_bound_default_points(shock):
+    """LAMMPS' linear-in-r^2 lookup of the exported table vs clusterdyn's cubic table."""
+    err = table_interpolation_error(shock.calc)["CD_1_1"]
+    assert err["max_rel_to_fmax_r_ge_0.75r0"] < 1e-8
+    assert err["max_rel_to_fmax"] < 1e-6
+    t = shock.calc.tables[0][0]
+    r = np.array([0.8, 0.95, 1.0, 1.05, 1.149]) * t.law.r0
+    e_l, f_l = lammps_table_forces(t, r)
+    e, f = t.evaluate(r)
+    assert np.allclose(f_l, f, rtol=0, atol=1e-8 * np.abs(f).max())
+
+
+def test_data_file(shock, deck):
+    text = (deck / "data.cd").read_text()
+    a = shock.atoms
+    assert f"{len(a)} atoms" in text and "1 atom types" in text
+    m = float(re.search(r"Masses\n\n1 (\S+)", text).group(1))
+    assert m == a.get_masses()[0]
+    body = text.split("Atoms # atomic\n\n")[1].split("\n\nVelocities")[0].split("\n")
+    xyz = np.array([[float(x) for x in ln.split()[2:]] for ln in body])
+    L = np.diag(a.cell.array)
+    d = xyz - a.positions
+    assert np.allclose(d[:, 0], 0.0, atol=1e-9 * L[1])                  # open along x
+    assert np.allclose(np.round(d[:, 1:] / L[1:]) * L[1:], d[:, 1:], atol=1e-6)   # wrapped across
+    vel = np.array([[float(x) for x in ln.split()[1:]]
+                    for ln in text.split("Velocities\n\n")[1].strip().split("\n")])
+    assert np.allclose(vel, a.get_velocities() * units.PS, rtol=1e-14)
+    # 3 km/s is 30 Angstrom/ps
+    assert np.isclose(vel.max(), 30.0, rtol=0.05)
+
+
+def test_input_script(shock, deck):
+    text = (deck / "in.cd").read_text()
+    c = shock.calc
+    p = c.potentials[0]
+    assert "units           metal" in text and "boundary        s p p" in text
+    assert f"pair_style      hybrid/overlay table linear {NPTS} dpd/ext/tstat 0.0 0.0" in text
+    g = re.search(r"pair_coeff\s+1 1 dpd/ext/tstat (\S+) (\S+) 0.0 0.0 (\S+)", text)
+    assert g, text
+    gamma = float(g.group(1))
+    assert float(g.group(2)) == gamma
+    # gamma = m Gamma = m c0/(J r0), in eV ps/Angstrom^2
+    m_gamma = p.mass * p.c0 / (50 * p.r0)
+    assert np.isclose(gamma, m_gamma / units.PS, rtol=1e-12)
+    assert float(g.group(3)) == c.tables[0][0].cutoff
+    assert "comm_modify     vel yes" in text
+    mv = re.search(r"fix\s+move_piston0 piston0 move linear (\S+) (\S+) (\S+)", text)
+    assert np.isclose(float(mv.group(1)), 30.0, rtol=1e-12)
+    assert "fix             integrate mobile nve" in text
+    dt = float(re.search(r"timestep\s+(\S+)", text).group(1))
+    assert np.isclose(dt, shock.dyn.dt / units.PS, rtol=1e-14)
+    ids = [int(x) for grp in re.findall(r"group piston0 id (.*)", text) for x in
+           sum([list(range(int(r.split(":")[0]), int(r.split(":")[-1]) + 1)) for r in grp.split()], [])]
+    assert sorted(ids) == sorted((shock.piston.index + 1).tolist())
+    meta = json.loads((deck / "cd.json").read_text())
+    assert meta["nsteps"] == 30 and meta["J"] == 50 and meta["n_particles"] == len(shock.atoms)
+
+
+def test_undamped_script_has_no_dpd(tmp_path):
+    s = build_shock(size=(6, 3, 3), J=None)
+    export_lammps(s.atoms, s.calc, s.dyn, tmp_path, n_points=101)
+    text = (tmp_path / "in.cd").read_text()
+    assert "dpd" not in text and "pair_style      table linear 101" in text
+    assert "pair_coeff      1 1 cd.table CD_1_1" in text
+
+
+def test_dpd_ext_tstat_at_zero_temperature_is_pair_damping():
+    """dpd/ext/tstat's dissipative force with w = 1 (exponent 0) and gamma_par = gamma_perp = g:
+    -g (rhat.v) rhat - g (1 - rhat rhat) v = -g v, the CD eq. (6) pair force."""
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        rhat = rng.normal(size=3)
+        rhat /= np.linalg.norm(rhat)
+        v = rng.normal(size=3)
+        g = rng.uniform(0.1, 10)
+        w = (1 - 0.7) ** 0.0
+        par = -g * w * w * (rhat @ v) * rhat
+        perp = -g * w * w * (v - (rhat @ v) * rhat)
+        assert np.allclose(par + perp, -g * v)
+
+
+def test_cli_export(tmp_path):
+    out = tmp_path / "deck"
+    assert cli_main(["export", "lammps", "shock", "--set", "size=6x3x3", "--set", "u=2km/s",
+                     "--set", "J=50", "--quiet", "--out", str(out)]) == 0
+    for f in ("data.cd", "cd.table", "in.cd", "cd.json"):
+        assert (out / f).exists()
+    meta = json.loads((out / "cd.json").read_text())
+    assert meta["extra"]["scene"] == "shock" and meta["nsteps"] > 100 and meta["J"] == 50
+    assert cli_main(["export", "lammps", "nosuchscene", "--out", str(out)]) == 2
+
+
+def test_ranges_and_parsers(tmp_path):
+    assert _ranges([5, 1, 2, 3, 7, 8]) == ["1:3", "5", "7:8"]
+    dump = tmp_path / "d.dump"
+    dump.write_text("ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS ss pp pp\n0 1\n0 1\n0 1\n"
+                    "ITEM: ATOMS id type x y z vx vy vz fx fy fz\n2 1 1 2 3 4 5 6 7 8 9\n1 1 0 0 0 0 0 0 0 0 1\n")
+    fr = read_dump(dump)
+    assert fr[0]["step"] == 7 and fr[0]["id"].tolist() == [1, 2] and fr[0]["forces"][1, 2] == 9
+    log = ("   Step          Time          PotEng         KinEng         TotEng    \n"
+           "         0   0   -1   2   1\n        10   0.5  -1.5   2.5   1\n"
+           "Loop time of 1.5 on 2 procs for 10 steps with 100 atoms\n\nNeighbor list builds = 3\n")
+    loop, thermo, builds = _parse_log("\n" + log)
+    assert loop[-1] == ("1.5", "2", "10", "100") and builds == 3 and thermo[1][2] == -1.5
