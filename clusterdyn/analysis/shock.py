@@ -77,21 +77,42 @@ def binned_profile(atoms, virials=None, axis=0, width=None, lo=None, hi=None, ex
             "von_mises": von_mises(stress), "width": width, "area": area}
 
 
-def front_position(x, u_axis, u_piston, fraction=0.5):
-    """Position of the shock front: the furthest point where the particle velocity
-    along the shock reaches ``fraction * u_piston`` (linear interpolation
-    between slabs, searched from the far end)."""
+def front_position(x, u_axis, u_piston, fraction=0.5, support=2):
+    """Position of the shock front along the profile.
+
+    The furthest slab whose particle velocity reaches ``fraction * u_piston``
+    and is backed by ``support`` slabs behind it that reach it too, searched
+    from the far end; linear interpolation to the next slab.  The support
+    keeps single slabs of clusters thrown ahead of the front (planes slipping
+    through each other at high u) from being taken for the front; they are
+    counted by :func:`ejecta_ahead`.  ``support=0`` gives the plain furthest
+    crossing.
+    """
     thr = fraction * u_piston
-    above = np.nonzero(u_axis >= thr)[0]
+    ok = np.asarray(u_axis) >= thr
+    backed = ok.copy()
+    for s in range(1, int(support) + 1):
+        backed[s:] &= ok[:-s]
+        backed[:s] = False
+    above = np.nonzero(backed)[0]
     if len(above) == 0:
-        return np.nan
+        above = np.nonzero(ok)[0]
+        if len(above) == 0:
+            return np.nan
     k = above.max()
     if k + 1 >= len(x):
         return x[k]
     u1, u2 = u_axis[k], u_axis[k + 1]
-    if u1 == u2:
+    if u1 == u2 or u2 >= thr:
         return x[k]
     return x[k] + (x[k + 1] - x[k]) * (u1 - thr) / (u1 - u2)
+
+
+def ejecta_ahead(profile, front, axis=0, fraction=0.5, u_piston=None):
+    """Mass in slabs ahead of ``front`` moving faster than ``fraction * u_piston`` (amu)."""
+    v = profile["velocity"][:, axis]
+    ahead = (profile["x"] > front + profile["width"]) & (v >= fraction * u_piston)
+    return float(profile["mass"][ahead].sum())
 
 
 def fit_front(times, fronts):
@@ -152,6 +173,11 @@ class ShockState:
         ``rho0 D_fit u`` (momentum conservation), to compare with P.
     steady : bool
         See STEADY_FIT_RMS, STEADY_D_HALVES, STEADY_U_TOL.
+    steady_reasons : list of str
+        Why the run is not steady (empty when it is).
+    ejecta : float
+        Mean mass moving faster than half the piston speed ahead of the front
+        (clusters thrown ahead), in slabs of material at rest.
     """
 
     D_fit: float
@@ -177,6 +203,7 @@ class ShockState:
     rho_bins: float = np.nan
     width: float = np.nan
     steady_reasons: list = field(default_factory=list)
+    ejecta: float = 0.0
 
     @property
     def mass_check(self):
@@ -260,7 +287,8 @@ class ShockTracker:
         prof = binned_profile(atoms, virials, ax, self.width, self.lo, self.hi, exclude)
         u_ax = prof["velocity"][:, ax]
         xf = front_position(prof["x"], u_ax, self.u_piston)
-        frame = {"t": float(time), "front": float(xf), "piston": float(piston_x), "profile": prof}
+        frame = {"t": float(time), "front": float(xf), "piston": float(piston_x), "profile": prof,
+                 "ejecta_mass": ejecta_ahead(prof, xf, ax, u_piston=self.u_piston) if np.isfinite(xf) else 0.0}
         frame.update(self._region(atoms, virials, prof, xf, piston_x, exclude))
         self.frames.append(frame)
         return xf
@@ -359,6 +387,11 @@ class ShockTracker:
         if not abs(u - self.u_piston) <= STEADY_U_TOL * abs(self.u_piston):
             reasons.append(f"particle velocity behind the front {u / self.u_piston:.3f} of the piston "
                            f"speed (tolerance {STEADY_U_TOL:.0%})")
+        ej = [f.get("ejecta_mass", 0.0) / (self.rho0 * f["profile"]["area"] * self.width)
+              for f, ok in zip(self.frames, use) if ok]
+        ejecta = float(np.mean(ej)) if ej else 0.0
+        if ejecta > 0.05:
+            notes.append(f"clusters thrown ahead of the front: {ejecta:.2f} slabs of material on average")
         steady = not reasons
         if not steady:
             notes.append("run not steady: " + "; ".join(reasons))
@@ -367,4 +400,106 @@ class ShockTracker:
             float(np.mean(Ps)), float(np.std(Ps)), float(D_mass), float(self.rho0 * D * u), self.rho0,
             self.u_piston, steady, int(use.sum()), notes, D_halves=tuple(float(h) for h in halves),
             D_mass_spread=float(np.std(Dm)), sigma_u=float(np.mean(sus)), sigma_u_spread=float(np.std(sus)),
-            rho_bins=float(np.mean(rb)) if rb else np.nan, width=float(self.width), steady_reasons=reasons)
+            rho_bins=float(np.mean(rb)) if rb else np.nan, width=float(self.width), steady_reasons=reasons,
+            ejecta=ejecta)
+
+
+def hugoniot_interpolant(u, D):
+    """D(u) through measured points: monotone cubic (PCHIP) inside, straight lines outside.
+
+    Parameters
+    ----------
+    u, D : (n,) arrays
+        Particle velocities and shock speeds (any consistent units), n >= 2.
+
+    Returns
+    -------
+    callable ``D(u)`` accepting scalars or arrays.
+    """
+    from scipy.interpolate import PchipInterpolator
+    u = np.asarray(u, float)
+    D = np.asarray(D, float)
+    ok = np.isfinite(u) & np.isfinite(D)
+    u, D = u[ok], D[ok]
+    order = np.argsort(u)
+    u, D = u[order], D[order]
+    if len(u) < 2:
+        raise ValueError("a Hugoniot interpolant needs at least two points")
+    inner = PchipInterpolator(u, D, extrapolate=False)
+    s_lo = (D[1] - D[0]) / (u[1] - u[0])
+    s_hi = (D[-1] - D[-2]) / (u[-1] - u[-2])
+
+    def f(x):
+        x = np.asarray(x, float)
+        y = np.where(x < u[0], D[0] + s_lo * (x - u[0]),
+                     np.where(x > u[-1], D[-1] + s_hi * (x - u[-1]), inner(np.clip(x, u[0], u[-1]))))
+        return y if y.ndim else float(y)
+    return f
+
+
+def mixture_D(u, phases, closure="equal_u"):
+    """Shock speed of a mixture at particle velocity ``u`` (Kuropatenko's rule, physics.md 1.6).
+
+    .. math::
+
+        \\frac{1}{D - u} = \\sum_i \\frac{\\alpha_i}{D_i - u_i}
+
+    with ``alpha_i`` the shocked volume fractions.  Two closures:
+
+    ``equal_u``
+        every phase has the mixture's ``u``; the rule is then exactly
+        ``1/D = sum_i phi0_i / D_i(u)`` with the initial volume fractions ``phi0_i``.
+    ``equal_p``
+        the phases are at one pressure ``P``, each on its own Hugoniot
+        (``P = rho0_i D_i u_i``), and their specific volumes add
+        (``v = sum_i w_i v_i``); the mixture's ``u`` and ``D`` follow from
+        ``P = rho0 D u`` and ``v/v0 = 1 - u/D``.
+
+    Parameters
+    ----------
+    u : float
+        Mixture particle velocity (any units, consistent with ``D_i``).
+    phases : sequence of (mass_fraction, rho0, D_of_u)
+        Mass fraction, initial density and Hugoniot ``D_i(u_i)`` (callable) of each phase.
+    closure : "equal_u" or "equal_p"
+
+    Returns
+    -------
+    float
+    """
+    from scipy.optimize import brentq
+    w = np.array([p[0] for p in phases], float)
+    w = w / w.sum()
+    v0i = 1.0 / np.array([p[1] for p in phases], float)
+    Df = [p[2] for p in phases]
+    v0 = float((w * v0i).sum())
+    phi0 = w * v0i / v0
+    if closure == "equal_u":
+        return float(1.0 / sum(p / float(d(u)) for p, d in zip(phi0, Df)))
+    if closure != "equal_p":
+        raise ValueError(f"closure={closure!r}: expected 'equal_u' or 'equal_p'")
+    if u <= 0:
+        return float(1.0 / sum(p / float(d(0.0)) for p, d in zip(phi0, Df)))
+
+    def phase_u(P, v0_, d):
+        f = lambda x: x * float(d(x)) / v0_ - P      # noqa: E731
+        hi = max(u, 1e-9)
+        while f(hi) < 0:
+            hi *= 2.0
+            if hi > 1e6 * max(u, 1.0):
+                raise ValueError("no particle velocity reaches this pressure on the phase's Hugoniot")
+        return brentq(f, 0.0, hi, xtol=1e-14 * hi)
+
+    def mix(P):
+        v = 0.0
+        for wi, v0_, d in zip(w, v0i, Df):
+            ui = phase_u(P, v0_, d)
+            v += wi * v0_ * (1.0 - ui / float(d(ui)))
+        dv = v0 - v
+        return np.sqrt(P * dv), v0 * np.sqrt(P / dv)
+
+    P_hi = u * float(Df[0](u)) / v0
+    while mix(P_hi)[0] < u:
+        P_hi *= 2.0
+    P = brentq(lambda P: mix(P)[0] - u, 1e-12 * P_hi, P_hi, xtol=1e-13 * P_hi)
+    return float(mix(P)[1])

@@ -321,6 +321,7 @@ def shock_scene(v, out=None, progress=True, restart=None):
              "fit_rms_um": state.fit_rms / units.um, "fit_rms_slabs": state.fit_rms / state.width,
              "D_halves_km_s": [h / units.km_s for h in state.D_halves],
              "mass_check": state.mass_check, "momentum_check": state.momentum_check,
+             "ejecta_fraction": state.ejecta,
              "rho_bins_g_cm3": state.rho_bins / units.g_cm3, "rho0_g_cm3": setup.rho0 / units.g_cm3
              if setup.rho0 else setup.material.rho0 / units.g_cm3,
              "n_particles": n, "n_steps": setup.nsteps, "particle_steps": n * setup.nsteps,

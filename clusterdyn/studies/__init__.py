@@ -1,0 +1,45 @@
+"""Studies: sweeps of scenes that produce tables and figures (``clusterdyn study NAME``).
+
+A study is a function ``study(overrides, out=None, progress=True, quiet=None)``:
+``overrides`` maps parameter names to text (``{"material": "Pb", "u": "1,2,3km/s"}``)
+or Python values; ``out`` is the folder for its CSV, PNG and JSON files
+(default ``runs/<study>-<tag>``); with ``progress`` it shows tqdm bars and
+prints its tables (``quiet`` overrides the printing).  It returns a
+JSON-ready dict listing every run.
+
+=============  =================================================================
+hugoniot       piston-speed sweep of the shock scene: D-u and P-rho against the
+               experimental Hugoniot and the cold curve; damping, attraction and
+               low-u checks; two-phase samples against the mixture rule
+convergence    error of D against the experiment and the finest run, versus wall
+               time and particle-steps, over sample size, time step, cutoff,
+               noise and r0
+stability      the measured time-step limit (bounded energy error) for u = 0-8 km/s
+=============  =================================================================
+"""
+
+import importlib
+
+from ..errors import InputError
+
+#: study name -> "module:function"
+STUDIES = {
+    "hugoniot": "hugoniot:hugoniot_study",
+    "convergence": "convergence:convergence_study",
+    "stability": "stability:stability_study",
+}
+
+
+def study_names():
+    return list(STUDIES)
+
+
+def get_study(name):
+    """The study function registered as ``name`` (see :data:`STUDIES`)."""
+    if name not in STUDIES:
+        raise InputError("study", name, "one of " + ", ".join(STUDIES))
+    mod, fn = STUDIES[name].split(":")
+    return getattr(importlib.import_module(f"{__name__}.{mod}"), fn)
+
+
+__all__ = ["STUDIES", "get_study", "study_names"]

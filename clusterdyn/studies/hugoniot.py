@@ -1,0 +1,572 @@
+"""``clusterdyn study hugoniot``: the CD Hugoniot of a material (or a two-phase sample).
+
+Sweeps the piston speed of the ``shock`` scene (default 0.5, 1, 1.5, 2, 3, 4,
+6 km/s) and writes, in ``--out`` (default ``runs/hugoniot-<material>``):
+
+* ``hugoniot.csv`` -- every run (group, u, D from the front fit with its
+  error, the experimental D and the relative error, D from mass
+  conservation, u behind the front, P = -sigma_xx against rho0 D u, rho, von
+  Mises intensity, fit residual, steadiness, wall time, particle-steps);
+* ``hugoniot_du.png`` and ``hugoniot_prho.png`` -- D-u and P-rho with the
+  experimental Hugoniot (``data/hugoniot.csv``) and the cold curve beside the
+  CD points (the cold curve in the D-u plane is its Rayleigh-line image
+  ``D^2 = P_x(delta) / (rho0 (1 - 1/delta))``, ``u = D (1 - 1/delta)``);
+* ``uniaxial.csv`` / ``uniaxial.png`` -- the static check behind the soft
+  response near 2 km/s: the longitudinal stress of the lattice under uniaxial
+  compression along the shock direction, with all pairs attracting and with
+  attraction only between pairs bonded at set-up;
+* ``hugoniot.json`` -- every run and every summary table.
+
+Options: ``compare_J=50`` reruns the sweep damped and reports the shift of D
+per u; ``compare_attraction=true`` reruns it with ``attraction=initial``;
+``low_u=0.05,0.1,0.15,0.2`` adds weak-shock runs extrapolated to u = 0 and
+compared with the lattice's longitudinal sound speed; ``case=hBN-B4C`` or
+``case=B4C-hBN`` (or ``inclusion=...``) runs a two-phase sample, the two pure
+phases over the same speeds, and compares the sample with the mixture rule
+(both closures).  Any parameter of the ``shock`` scene (direction, size, r0,
+rc, J, noise, seed, dt_factor, frames, attraction, ...) is passed to every run.
+"""
+
+import math
+import time
+
+import numpy as np
+
+from .. import units
+from ..analysis.shock import hugoniot_interpolant, mixture_D
+from ..build import fcc_packing, repeat_lengths
+from ..build.two_phase import PAPER_CASES
+from ..calculators import ClusterDynamics, mark_initial_bonds
+from ..errors import InputError
+from ..materials import get_material, hugoniot
+from ..scenes import get_scene
+from ..scenes.base import Param
+from ..scenes.shock import CD_MATERIALS
+from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
+                     run_scene, shock_row, write_csv, write_json)
+
+DEFAULT_U = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
+
+#: longitudinal sound speed of the nearest-neighbour fcc lattice along the shock direction, in c0
+#: (physics.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
+LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
+
+PARAMS = [
+    Param("material", "Al", "material (the matrix of a two-phase sample)", kind="choice",
+          choices=CD_MATERIALS),
+    Param("case", None, "a two-phase sample of the CD paper (sets material, inclusion, inclusion_fraction, "
+          "inclusion_diameter)", kind="choice", choices=tuple(PAPER_CASES), optional=True),
+    ListParam("u", DEFAULT_U, "piston speeds of the sweep", unit="km/s", low=0.0, high=20.0, low_open=True),
+    Param("compare_J", None, "also run the sweep with damping Gamma = c0/(J r0) and report the shift of D",
+          low=0.0, low_open=True, optional=True),
+    Param("compare_attraction", False, "also run the sweep with attraction=initial", kind="bool"),
+    ListParam("low_u", None, "weak-shock piston speeds extrapolated to u = 0 (e.g. 0.05,0.1,0.15,0.2)",
+              unit="km/s", low=0.0, high=1.0, low_open=True, optional=True),
+    Param("low_u_size", (160, 4, 4), "sample of the weak-shock runs (repeat cells)", kind="ints"),
+    Param("low_u_noise", 1.0, "initial noise of the weak-shock runs", unit="m/s", low=0.0),
+    Param("low_u_frames", 100, "profiles recorded in a weak-shock run", kind="int", low=5),
+    ListParam("phase_u", (8.0,), "extra piston speeds for the pure-phase Hugoniots of a two-phase sample "
+              "(the equal-pressure closure needs them beyond the sweep)", unit="km/s", low=0.0, low_open=True,
+              optional=True),
+    Param("uniaxial", True, "static uniaxial-compression check of the longitudinal stress", kind="bool"),
+    Param("plots", True, "write the PNG figures", kind="bool"),
+]
+
+MAIN_COLUMNS = [
+    ("u_piston", "u_p km/s", ".3g"), ("D", "D km/s", ".4f"), ("D_err", "+-", ".3f"),
+    ("D_ref", "D_exp", ".4f"), ("err_ref", "err", "+.2%"), ("D_mass", "D_mass", ".4f"),
+    ("mass_check", "mass", "+.2%"), ("u", "u km/s", ".4f"), ("u_dev", "u/u_p-1", "+.2%"),
+    ("P", "P GPa", ".2f"), ("P_momentum", "rho0Du", ".2f"), ("momentum_check", "P/rho0Du-1", "+.2%"),
+    ("rho", "rho g/cm3", ".4f"), ("sigma_u", "sig_u GPa", ".3g"), ("fit_rms_slabs", "rms slab", ".3f"),
+    ("steady", "steady", ""), ("wall_s", "wall s", ".1f"), ("particle_steps", "p-steps", ".3g"),
+]
+
+
+def _fwd_with(fwd, **kw):
+    d = dict(fwd)
+    d.update({k: v for k, v in kw.items() if v is not None})
+    d.setdefault("h5md", "false")
+    d.setdefault("checkpoint_every", "0")
+    return d
+
+
+# --------------------------------------------------------------------------- static checks
+def uniaxial_stress(material, deltas, direction="100", rc=1.15, attraction="all", r0=5 * units.um):
+    """Longitudinal stress ``-sigma_xx`` of the lattice under uniaxial compression (ASE units).
+
+    A periodic fcc block with ``direction`` along x is compressed along x only,
+    to density ``delta * rho0`` (affine, no relaxation: every cluster of an fcc
+    lattice is a centre of symmetry, so the affine state is in equilibrium),
+    and the virial stress is read.  With ``attraction="initial"`` the pairs
+    within the cutoff before compression are the set-up bonds.
+
+    Returns
+    -------
+    (n,) array of ``-sigma_xx`` (eV/Angstrom^3).
+    """
+    L = repeat_lengths(direction, r0)
+    size = tuple(int(max(2, math.ceil(4.5 * r0 / x))) for x in L)
+    base = fcc_packing(material, r0, size=size, direction=direction, pbc=True)
+    if attraction == "initial":
+        mark_initial_bonds(base, rc)
+    out = []
+    for d in np.atleast_1d(deltas):
+        a = base.copy()
+        cell = a.cell.array.copy()
+        cell[0, 0] /= d
+        a.set_cell(cell, scale_atoms=True)
+        a.calc = ClusterDynamics(rc=rc, attraction=attraction)
+        out.append(-a.get_stress()[0])
+    return np.array(out)
+
+
+def cold_curve_du(material, deltas):
+    """The cold curve's image in the D-u plane (Rayleigh line from rest to P_x(delta)); km/s."""
+    mat = get_material(material)
+    d = np.asarray(deltas, float)
+    P = np.array([mat.curve.pressure(x) for x in d])
+    eps = 1.0 - 1.0 / d
+    D = np.sqrt(P / (mat.rho0 * eps))
+    return D * eps / units.km_s, D / units.km_s
+
+
+def stress_du(sigma, deltas, rho0):
+    """A stress-compression curve's Rayleigh-line image (u, D) in km/s."""
+    d = np.asarray(deltas, float)
+    eps = 1.0 - 1.0 / d
+    with np.errstate(invalid="ignore"):
+        D = np.sqrt(np.asarray(sigma) / (rho0 * eps))
+    return D * eps / units.km_s, D / units.km_s
+
+
+# --------------------------------------------------------------------------- the study
+def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
+    """Run the Hugoniot study (see the module docstring); returns a JSON-ready dict."""
+    t_start = time.perf_counter()
+    quiet = (not progress) if quiet is None else quiet
+    scene = get_scene("shock")
+    v, fwd = parse_params(PARAMS, overrides, forward=scene, study="hugoniot")
+    if v["case"] is not None:
+        m, inc, frac, dia = PAPER_CASES[v["case"]]
+        v["material"] = m
+        fwd.setdefault("inclusion", inc)
+        fwd.setdefault("inclusion_fraction", frac)
+        fwd.setdefault("inclusion_diameter", f"{dia / units.um:g}um")
+        fwd.setdefault("r0", "4um")
+    sv = scene.parse(_fwd_with(fwd, material=v["material"]))
+    two = sv["inclusion"] is not None
+    mat = v["material"]
+    tag = (f"{mat}+{sv['inclusion']}" if two else mat) + (f"-{sv['direction']}" if sv["direction"] != "100" else "")
+    folder = out_folder(out, "hugoniot", tag)
+    runs_dir = folder / "runs"
+
+    # ---- the list of runs
+    plan = []     # (group, overrides)
+    for u in v["u"]:
+        plan.append(("main", _fwd_with(fwd, material=mat, u=u)))
+    if v["compare_J"] is not None:
+        for u in v["u"]:
+            plan.append(("damped", _fwd_with(fwd, material=mat, u=u, J=v["compare_J"])))
+    if v["compare_attraction"]:
+        for u in v["u"]:
+            plan.append(("attraction=initial", _fwd_with(fwd, material=mat, u=u, attraction="initial")))
+    if v["low_u"]:
+        lsize = "x".join(map(str, v["low_u_size"]))
+        for u in v["low_u"]:
+            plan.append(("low-u", _fwd_with(fwd, material=mat, u=u, size=lsize, noise=v["low_u_noise"],
+                                             frames=v["low_u_frames"])))
+        # the same weakest shock with the sweep's noise, to show what the noise does there
+        plan.append(("low-u noise check", _fwd_with(fwd, material=mat, u=min(v["low_u"]), size=lsize,
+                                                     frames=v["low_u_frames"])))
+    phases = {}
+    if two:
+        pu = sorted(set(v["u"]) | set(v["phase_u"] or ()))
+        pure = {k: x for k, x in fwd.items() if not k.startswith("inclusion")}
+        phases = {"matrix": mat, "inclusion": sv["inclusion"]}
+        for role, m in phases.items():
+            for u in pu:
+                plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
+
+    rows = []
+    bar = progress_bar(len(plan), f"hugoniot {tag}", progress)
+    for n, (group, ov) in enumerate(plan):
+        if bar is not None:
+            bar.set_postfix_str(f"{group} u={ov['u']}")
+        res, err, wall = run_scene(scene, ov, progress=progress, folder=runs_dir / f"{n:02d}")
+        row = shock_row(res, err, wall)
+        pv = scene.display(scene.parse(ov))
+        row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
+                    "J": pv["J"], "attraction": pv["attraction"], "noise_m_s": pv["noise"]["value"],
+                    "size": "x".join(map(str, pv["size"])), "direction": pv["direction"]})
+        if res is not None and "two_phase" in res.extra:
+            row["inclusion_mass_fraction"] = res.extra["two_phase"]["mass_fraction"]
+            row["inclusion_volume_fraction"] = res.extra["two_phase"]["volume_fraction"]
+            row["rho0"] = res.extra["rho0_g_cm3"]
+        rows.append(row)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+
+    summary = {}
+    text = []
+    main = [r for r in rows if r["group"] == "main"]
+    title = (f"CD Hugoniot of {tag} [{sv['direction']}], r0 = {sv['r0'] / units.um:g} um, rc = {sv['rc']:g}, "
+             f"size {'x'.join(map(str, sv['size']))}, J = {sv['J'] if sv['J'] else 'off'}, noise "
+             f"{sv['noise'] / units.m_s:g} m/s, attraction = {sv['attraction']}")
+    text.append(format_table(main, MAIN_COLUMNS, title))
+    text.append(_conservation_verdict(main))
+    summary["main"] = _strip(main)
+
+    if v["compare_J"] is not None:
+        damp = [r for r in rows if r["group"] == "damped"]
+        tab = []
+        for a, b in zip(main, damp):
+            tab.append({"u": a["u_piston"], "D_off": a["D"], "D_on": b["D"], "shift": b["D"] / a["D"] - 1.0,
+                        "err_off": a["err_ref"], "err_on": b["err_ref"], "steady_on": b["steady"]})
+        cols = [("u", "u km/s", ".3g"), ("D_off", "D (J off)", ".4f"), ("D_on", f"D (J={v['compare_J']:g})", ".4f"),
+                ("shift", "shift", "+.2%"), ("err_off", "err off", "+.2%"), ("err_on", "err on", "+.2%"),
+                ("steady_on", "steady on", "")]
+        text.append(format_table(tab, cols, f"damping on (J = {v['compare_J']:g}) against off: shift of D"))
+        summary["damping"] = tab
+        summary["damping_md"] = markdown_table(tab, cols)
+
+    if v["compare_attraction"]:
+        att = [r for r in rows if r["group"] == "attraction=initial"]
+        tab = [{"u": a["u_piston"], "D_all": a["D"], "D_initial": b["D"], "D_ref": a["D_ref"],
+                "err_all": a["err_ref"], "err_initial": b["err_ref"], "steady": b["steady"],
+                "mass": b["mass_check"], "momentum": b["momentum_check"]} for a, b in zip(main, att)]
+        cols = [("u", "u km/s", ".3g"), ("D_all", "D all", ".4f"), ("D_initial", "D initial", ".4f"),
+                ("D_ref", "D_exp", ".4f"), ("err_all", "err all", "+.2%"), ("err_initial", "err initial", "+.2%"),
+                ("mass", "mass (ini)", "+.2%"), ("momentum", "mom. (ini)", "+.2%"), ("steady", "steady", "")]
+        text.append(format_table(tab, cols, "attraction between all pairs in the cutoff against set-up bonds only"))
+        summary["attraction"] = tab
+        summary["attraction_md"] = markdown_table(tab, cols)
+
+    if v["low_u"]:
+        lu = _low_u(rows, mat, sv, two)
+        text.append(lu.pop("text"))
+        summary["low_u"] = lu
+
+    if two:
+        mix = _mixture(rows, main, phases, tag)
+        text.append(mix.pop("text"))
+        summary["mixture"] = mix
+
+    uni = None
+    if v["uniaxial"]:
+        uni = _uniaxial(mat, sv, two)
+        if uni is not None:
+            text.append(uni.pop("text"))
+            summary["uniaxial"] = {k: x for k, x in uni.items() if k != "arrays"}
+
+    files = []
+    files.append(write_csv(folder / "hugoniot.csv", _strip(rows)))
+    if uni is not None:
+        files.append(write_csv(folder / "uniaxial.csv", uni["rows"]))
+    if v["plots"]:
+        files += _plots(folder, rows, mat, sv, two, phases, summary, uni)
+    result = {"study": "hugoniot", "material": tag, "direction": sv["direction"],
+              "params": {k: (list(x) if isinstance(x, tuple) else x) for k, x in v.items()},
+              "scene_overrides": fwd, "runs": _strip(rows), "summary": summary,
+              "files": [str(f) for f in files], "wall_time_s": time.perf_counter() - t_start}
+    files.append(write_json(folder / "hugoniot.json", result))
+    result["files"] = [str(f) for f in files]
+    text.append("wrote " + ", ".join(str(f) for f in files))
+    if not quiet:
+        print("\n\n".join(text))
+    return result
+
+
+def _strip(rows):
+    return [{k: x for k, x in r.items()} for r in rows]
+
+
+def _conservation_verdict(rows):
+    st = [r for r in rows if r.get("steady")]
+    if not st:
+        return "no steady run"
+    mass = sum(abs(r["mass_check"]) <= 0.02 for r in st)
+    mom = sum(abs(r["momentum_check"]) <= 0.05 for r in st)
+    uns = [f"{r['u_piston']:g}" for r in rows if not r.get("steady")]
+    return (f"steady runs: {len(st)} of {len(rows)}" + (f" (unsteady: u = {', '.join(uns)} km/s)" if uns else "")
+            + f"; D_fit and D_mass within 2%: {mass}/{len(st)}; -sigma_xx and rho0 D u within 5%: {mom}/{len(st)}"
+            + "\nsteady = front linear in time (rms residual <= 0.5 slab, D over the two halves of the fit within "
+            "3%) and u behind the front within 3% of the piston")
+
+
+def _low_u(rows, mat, sv, two):
+    lo = [r for r in rows if r["group"] == "low-u" and np.isfinite(r.get("D", np.nan))]
+    chk = [r for r in rows if r["group"] == "low-u noise check"]
+    out = {"rows": lo}
+    lines = []
+    cols = [("u_piston", "u_p km/s", ".3g"), ("D", "D km/s", ".4f"), ("D_err", "+-", ".4f"),
+            ("u_dev", "u/u_p-1", "+.2%"), ("mass_check", "mass", "+.2%"), ("fit_rms_slabs", "rms slab", ".3f"),
+            ("noise_m_s", "noise m/s", ".3g"), ("steady", "steady", ""), ("wall_s", "wall s", ".1f")]
+    lines.append(format_table(lo + chk, cols, "weak shocks"))
+    if len(lo) >= 2:
+        u = np.array([r["u_piston"] for r in lo])
+        D = np.array([r["D"] for r in lo])
+        w = np.array([1.0 / max(r["D_err"] or 1e-3, 1e-4) ** 2 for r in lo])
+        A = np.vstack([np.ones_like(u), u]).T
+        cov = np.linalg.inv(A.T @ (w[:, None] * A))
+        coef = cov @ (A.T @ (w * D))
+        res = D - A @ coef
+        dof = max(1, len(u) - 2)
+        scale = max(1.0, float((w * res ** 2).sum() / dof))
+        D0, s = float(coef[0]), float(coef[1])
+        D0_err = float(math.sqrt(cov[0, 0] * scale))
+        out.update({"D0": D0, "D0_err": D0_err, "slope": s})
+        lines.append(f"D(u) = {D0:.4f} (+- {D0_err:.4f}) + {s:.3f} u km/s from u = {u.min():g}-{u.max():g} km/s")
+        if not two:
+            c0 = get_material(mat).c0 / units.km_s
+            target = LATTICE_CL[sv["direction"]] * c0
+            dev = D0 / target - 1.0
+            out.update({"c0": c0, "lattice_cL": target, "deviation": dev})
+            fac = {"100": "sqrt(3/2)", "110": "sqrt(15/8)", "111": "sqrt(2)"}[sv["direction"]]
+            lines.append(f"extrapolated to u = 0: D0 = {D0:.4f} km/s against the lattice's longitudinal sound "
+                         f"speed along [{sv['direction']}] {fac} c0 = {target:.4f} km/s (c0 = {c0:.4f} km/s): "
+                         f"{dev:+.2%}")
+            try:
+                ref = hugoniot(mat)
+                lines.append(f"the lattice is stiffer than the real metal at low u: D0 is {D0 / ref.c0_km_s - 1:+.1%} "
+                             f"above the experimental Hugoniot's intercept ({ref.name}: {ref.c0_km_s:g} km/s) and "
+                             f"{D0 / c0 - 1:+.1%} above the bulk sound speed c0 (a nearest-neighbour central-force "
+                             "lattice has C11 = 3/2 K along [100], physics.md 1.5)")
+            except InputError:
+                lines.append(f"the lattice is stiffer than the material at low u: D0 is {D0 / c0 - 1:+.1%} above "
+                             "the bulk sound speed c0")
+    if chk and lo:
+        base = [r for r in lo if r["u_piston"] == chk[0]["u_piston"]]
+        if base and np.isfinite(chk[0].get("D", np.nan)):
+            d = chk[0]["D"] / base[0]["D"] - 1.0
+            out["noise_effect"] = d
+            lines.append(f"noise at u = {chk[0]['u_piston']:g} km/s: {chk[0]['noise_m_s']:g} m/s instead of "
+                         f"{base[0]['noise_m_s']:g} m/s changes D by {d:+.2%} and u behind the front by "
+                         f"{(chk[0]['u'] - base[0]['u']) / base[0]['u_piston']:+.2%} of u_p")
+    out["text"] = "\n".join(lines)
+    return out
+
+
+def _mixture(rows, main, phases, tag):
+    lines = []
+    curves = {}
+    pts = {}
+    for role, m in phases.items():
+        pr = [r for r in rows if r["group"] == f"pure {m}" and np.isfinite(r.get("D", np.nan))]
+        pts[role] = pr
+        curves[role] = hugoniot_interpolant([r["u"] for r in pr], [r["D"] for r in pr])
+    tab = []
+    for r in main:
+        if not np.isfinite(r.get("D", np.nan)):
+            continue
+        w_inc = r.get("inclusion_mass_fraction")
+        ph = [(1.0 - w_inc, get_material(phases["matrix"]).rho0 / units.g_cm3, curves["matrix"]),
+              (w_inc, get_material(phases["inclusion"]).rho0 / units.g_cm3, curves["inclusion"])]
+        Du = mixture_D(r["u"], ph, "equal_u")
+        Dp = mixture_D(r["u"], ph, "equal_p")
+        tab.append({"u_piston": r["u_piston"], "u": r["u"], "D": r["D"], "D_err": r["D_err"],
+                    "D_equal_u": Du, "err_equal_u": r["D"] / Du - 1.0, "D_equal_p": Dp,
+                    "err_equal_p": r["D"] / Dp - 1.0, "steady": r["steady"], "w_inclusion": w_inc})
+    cols = [("u_piston", "u_p km/s", ".3g"), ("u", "u km/s", ".4f"), ("D", "D CD", ".4f"), ("D_err", "+-", ".3f"),
+            ("D_equal_u", "rule equal_u", ".4f"), ("err_equal_u", "CD/rule-1", "+.2%"),
+            ("D_equal_p", "rule equal_p", ".4f"), ("err_equal_p", "CD/rule-1", "+.2%"), ("steady", "steady", "")]
+    lines.append(format_table(tab, cols, f"{tag}: CD against the mixture rule 1/(D-u) = sum alpha_i/(D_i-u_i), "
+                                         "D_i(u_i) from each pure phase's own CD Hugoniot"))
+    if tab:
+        eu = np.abs([t["err_equal_u"] for t in tab])
+        ep = np.abs([t["err_equal_p"] for t in tab])
+        lines.append(f"mean |error|: equal_u {eu.mean():.2%} (max {eu.max():.2%}), equal_p {ep.mean():.2%} "
+                     f"(max {ep.max():.2%}); inclusion mass fraction of the sample {tab[0]['w_inclusion']:.4f}")
+    for role, pr in pts.items():
+        lines.append(format_table(pr, [("u_piston", "u_p km/s", ".3g"), ("D", "D km/s", ".4f"),
+                                       ("u", "u km/s", ".4f"), ("steady", "steady", "")],
+                                  f"pure {phases[role]} ({role}), CD"))
+    return {"rows": tab, "markdown": markdown_table(tab, cols), "text": "\n".join(lines),
+            "phase_points": {phases[k]: [(r["u"], r["D"]) for r in p] for k, p in pts.items()}}
+
+
+def _uniaxial(mat, sv, two):
+    if two:
+        return None
+    m = get_material(mat)
+    deltas = np.round(np.arange(1.0, 1.625, 0.025), 4)[1:]
+    s_all = uniaxial_stress(mat, deltas, sv["direction"], sv["rc"], "all")
+    s_ini = uniaxial_stress(mat, deltas, sv["direction"], sv["rc"], "initial")
+    Px = np.array([m.curve.pressure(d) for d in deltas])
+    try:
+        ref = hugoniot(mat)
+        # experimental Hugoniot pressure at the same compression
+        uu = np.linspace(0.0, 8.0, 801) * units.km_s
+        rr = ref.density(uu) / m.rho0
+        Ph = np.interp(deltas, rr * m.rho0 / (ref.rho0_g_cm3 * units.g_cm3), ref.pressure(uu), right=np.nan)
+    except InputError:
+        ref, Ph = None, np.full(len(deltas), np.nan)
+    rows = []
+    for d, a, b, p, h in zip(deltas, s_all, s_ini, Px, Ph):
+        rows.append({"delta": float(d), "sigma_all_GPa": a / units.GPa, "sigma_initial_GPa": b / units.GPa,
+                     "P_cold_GPa": p / units.GPa, "P_hugoniot_exp_GPa": h / units.GPa})
+    note = ""
+    if sv["direction"] == "100":
+        dc = math.sqrt(2.0) / sv["rc"]
+        dr = math.sqrt(2.0)
+        note = (f"[100]: the second neighbours along x (at sqrt(2) r0 at rest) come within rc = {sv['rc']:g} r0 at "
+                f"rho/rho0 = {dc:.3f} and stay on the attractive branch (r > r0) up to rho/rho0 = {dr:.3f}")
+    dec = [r["delta"] for r, nxt in zip(rows, rows[1:]) if nxt["sigma_all_GPa"] < r["sigma_all_GPa"]]
+    cols = [("delta", "rho/rho0", ".3f"), ("sigma_all_GPa", "-s_xx all GPa", ".2f"),
+            ("sigma_initial_GPa", "-s_xx initial GPa", ".2f"), ("P_cold_GPa", "P_x cold GPa", ".2f"),
+            ("P_hugoniot_exp_GPa", "P Hugoniot exp GPa", ".2f")]
+    text = [format_table(rows, cols, f"static uniaxial compression along [{sv['direction']}] (rc = {sv['rc']:g}): "
+                                     "longitudinal stress")]
+    if note:
+        text.append(note)
+    if dec:
+        text.append(f"with all pairs attracting the longitudinal stress falls as compression rises from "
+                    f"rho/rho0 = {dec[0]:.3f}: the softening that makes D low near u = 2 km/s; with set-up bonds "
+                    "only it rises monotonically")
+    return {"rows": rows, "text": "\n".join(text), "markdown": markdown_table(rows, cols),
+            "arrays": (deltas, s_all, s_ini, Px)}
+
+
+# --------------------------------------------------------------------------- figures
+def _plots(folder, rows, mat, sv, two, phases, summary, uni):
+    from ..scenes.common import matplotlib_agg
+    plt = matplotlib_agg()
+    files = []
+    groups = {}
+    for r in rows:
+        if r.get("D") is None or not np.isfinite(r.get("D", np.nan)):
+            continue
+        groups.setdefault(r["group"], []).append(r)
+    umax = max([r["u_piston"] for r in rows] + [1.0]) * 1.08
+    style = {"main": ("o", "C0", "CD" + (" two-phase" if two else "")), "damped": ("s", "C1", "CD damped"),
+             "attraction=initial": ("D", "C2", "CD attraction=initial"), "low-u": ("v", "C4", "CD weak shocks"),
+             "low-u noise check": ("x", "C4", "CD weak shock, sweep noise")}
+    ref = None
+    if not two:
+        try:
+            ref = hugoniot(mat)
+        except InputError:
+            ref = None
+    # --- D-u
+    fig, ax = plt.subplots(figsize=(7, 5.2))
+    uu = np.linspace(0.0, umax, 200)
+    if ref is not None:
+        ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", lw=1.5, label=f"experiment ({ref.name})")
+    names = [mat] if not two else list(phases.values())
+    for k, m in enumerate(names):
+        dd = np.linspace(1.0005, 3.0, 400)
+        cu, cD = cold_curve_du(m, dd)
+        sel = cu <= umax
+        ax.plot(cu[sel], cD[sel], ls=":", color="k" if not two else f"C{5 + k}", lw=1.2,
+                label=f"cold curve {m} (Rayleigh line to P_x)")
+    if uni is not None:
+        dl, sa, si, _ = uni["arrays"]
+        rho0 = get_material(mat).rho0
+        for s, lab, c in ((sa, "all pairs", "C3"), (si, "set-up bonds", "C2")):
+            su, sD = stress_du(s, dl, rho0)
+            ax.plot(su, sD, "--", color=c, lw=1, label=f"static uniaxial lattice, {lab}")
+    for g, rr in groups.items():
+        if g.startswith("pure "):
+            continue
+        mk, c, lab = style.get(g, ("o", "C7", g))
+        ax.errorbar([r["u"] for r in rr], [r["D"] for r in rr], yerr=[r["D_err"] or 0 for r in rr], fmt=mk,
+                    color=c, ms=5, label=lab, mfc="none" if g != "main" else c)
+    if two:
+        for k, (role, m) in enumerate(phases.items()):
+            rr = groups.get(f"pure {m}", [])
+            ax.plot([r["u"] for r in rr], [r["D"] for r in rr], "^", color=f"C{5 + k}", label=f"CD pure {m}")
+        mix = summary.get("mixture", {})
+        pp = mix.get("phase_points", {})
+        if len(pp) == 2:
+            w = mix["rows"][0]["w_inclusion"] if mix.get("rows") else 0.3
+            cm = hugoniot_interpolant(*zip(*pp[phases["matrix"]]))
+            ci = hugoniot_interpolant(*zip(*pp[phases["inclusion"]]))
+            ph = [(1 - w, get_material(phases["matrix"]).rho0 / units.g_cm3, cm),
+                  (w, get_material(phases["inclusion"]).rho0 / units.g_cm3, ci)]
+            ug = np.linspace(0.3, umax, 60)
+            ax.plot(ug, [mixture_D(x, ph, "equal_u") for x in ug], "k-", lw=1.3, label="mixture rule, equal_u")
+            ax.plot(ug, [mixture_D(x, ph, "equal_p") for x in ug], "k--", lw=1.3, label="mixture rule, equal_p")
+    ax.set_xlim(0, umax)
+    ax.set_xlabel("particle velocity u (km/s)")
+    ax.set_ylabel("shock speed D (km/s)")
+    ax.set_title(f"D-u: {mat}{' + ' + phases.get('inclusion', '') if two else ''} [{sv['direction']}], "
+                 f"r0 = {sv['r0'] / units.um:g} um")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    p = folder / "hugoniot_du.png"
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    files.append(p)
+    # --- P-rho
+    fig, ax = plt.subplots(figsize=(7, 5.2))
+    for k, m in enumerate(names):
+        mm = get_material(m)
+        dd = np.linspace(1.0, 2.2, 300)
+        ax.plot(dd * mm.rho0 / units.g_cm3, [mm.curve.pressure(x) / units.GPa for x in dd], ":",
+                color="k" if not two else f"C{5 + k}", label=f"cold curve P_x {m}")
+    if ref is not None:
+        ur = np.linspace(0.0, umax, 200) * units.km_s
+        ax.plot(ref.density(ur) / units.g_cm3, ref.pressure(ur) / units.GPa, "k-", lw=1.5,
+                label=f"experiment ({ref.name})")
+    if uni is not None:
+        dl, sa, si, _ = uni["arrays"]
+        r0_ = get_material(mat).rho0 / units.g_cm3
+        ax.plot(dl * r0_, sa / units.GPa, "--", color="C3", lw=1, label="static uniaxial lattice, all pairs")
+        ax.plot(dl * r0_, si / units.GPa, "--", color="C2", lw=1, label="static uniaxial lattice, set-up bonds")
+    for g, rr in groups.items():
+        mk, c, lab = style.get(g, ("^", None, f"CD {g}"))
+        ax.plot([r["rho"] for r in rr], [r["P"] for r in rr], mk, color=c, ms=5, label=lab,
+                mfc="none" if g != "main" else c)
+    ax.set_xlabel("density rho (g/cm3)")
+    ax.set_ylabel("longitudinal stress P = -sigma_xx (GPa)")
+    ax.set_title(f"P-rho: {mat}{' + ' + phases.get('inclusion', '') if two else ''} [{sv['direction']}]")
+    ymax = max([r["P"] for rr in groups.values() for r in rr if np.isfinite(r.get("P", np.nan))] + [1.0]) * 1.15
+    ax.set_ylim(0, ymax)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    p = folder / "hugoniot_prho.png"
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    files.append(p)
+    if "low_u" in summary and "D0" in summary["low_u"]:
+        lu = summary["low_u"]
+        fig, ax = plt.subplots(figsize=(6, 4.2))
+        rr = groups.get("low-u", [])
+        ax.errorbar([r["u_piston"] for r in rr], [r["D"] for r in rr], yerr=[r["D_err"] for r in rr], fmt="v",
+                    color="C4", label="CD weak shocks")
+        x = np.linspace(0, max(r["u_piston"] for r in rr) * 1.1, 10)
+        ax.plot(x, lu["D0"] + lu["slope"] * x, "C4-", lw=1, label=f"fit, D0 = {lu['D0']:.3f} km/s")
+        if "lattice_cL" in lu:
+            ax.axhline(lu["lattice_cL"], color="k", ls="--", lw=1,
+                       label=f"lattice c_L [{sv['direction']}] = {lu['lattice_cL']:.3f} km/s")
+            ax.axhline(lu["c0"], color="k", ls=":", lw=1, label=f"c0 = {lu['c0']:.3f} km/s")
+        if ref is not None:
+            ax.plot(x, ref.D(x * units.km_s) / units.km_s, "k-", lw=1, label=f"experiment ({ref.name})")
+        ax.set_xlabel("piston speed u (km/s)")
+        ax.set_ylabel("D (km/s)")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        p = folder / "low_u.png"
+        fig.savefig(p, dpi=120)
+        plt.close(fig)
+        files.append(p)
+    if uni is not None:
+        dl, sa, si, Px = uni["arrays"]
+        fig, ax = plt.subplots(figsize=(6, 4.2))
+        ax.plot(dl, sa / units.GPa, "o-", color="C3", ms=3, label="-sigma_xx, all pairs attract")
+        ax.plot(dl, si / units.GPa, "s-", color="C2", ms=3, label="-sigma_xx, set-up bonds only")
+        ax.plot(dl, Px / units.GPa, "k:", label="cold curve P_x (hydrostatic)")
+        if sv["direction"] == "100":
+            ax.axvline(math.sqrt(2) / sv["rc"], color="0.5", lw=0.8)
+            ax.text(math.sqrt(2) / sv["rc"], ax.get_ylim()[1] * 0.9, " 2nd neighbours\n enter rc", fontsize=7)
+        ax.set_xlabel("rho/rho0 (uniaxial strain)")
+        ax.set_ylabel("GPa")
+        ax.set_title(f"static uniaxial compression along [{sv['direction']}], rc = {sv['rc']:g}")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        p = folder / "uniaxial.png"
+        fig.savefig(p, dpi=120)
+        plt.close(fig)
+        files.append(p)
+    return files

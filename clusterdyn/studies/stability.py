@@ -1,0 +1,256 @@
+"""``clusterdyn study stability``: the measured time-step limit of CD runs, u = 0 ... 8 km/s.
+
+For every piston speed u a small [100] piston sample (at u = 0: a periodic
+block with thermal noise) is run, undamped, over the same physical time at
+growing time steps, and the energy balance is tracked step by step:
+
+.. math::
+
+    \\epsilon(t) = \\frac{|E_{kin} + E_{pot} - E(0) - W_{piston}(t)|}{E_{scale}},
+    \\qquad W_{piston} = -\\int F_{sample \\to piston} \\cdot u \\, dt
+
+(trapezoidal rule; ``E_scale`` is the work done by the piston at the end, or
+the initial kinetic energy at u = 0).  A time step is *bounded* when the run
+ends without :class:`~clusterdyn.errors.InstabilityError` and
+``max_t epsilon < energy_tol`` (default 5%: past the limit the error grows
+exponentially, so the value matters little).  The limit is found by
+stepping the time step up by sqrt(2) from the default until it fails, then
+bisecting.  The table lists, in units of r0/c0: the default time step
+``0.03 r0/(c0 + u)``, the measured limit, their ratio (the margin), the
+energy error at the default step, the closest approach seen (r/r0), the
+limit the dynamics' own stiffness check predicts at that approach
+(:func:`clusterdyn.md.stability_limit`), and what stopped the first failing
+run.
+
+While the limit is measured the dynamics' stiffness check is switched off
+(``check_interval`` beyond the run) so the measurement is the integrator's,
+not the check's; the guard against a particle moving more than 0.25 r0 in a
+step stays on and is reported when it is what stops a run.
+"""
+
+import math
+import time
+
+import numpy as np
+
+from .. import units
+from ..build import fcc_packing
+from ..calculators import ClusterDynamics
+from ..errors import InputError, InstabilityError
+from ..md import DampedVerlet, stability_limit
+from ..md.damped import TIMESTEP_FACTOR
+from ..scenes.base import Param
+from ..scenes.common import thermal_noise
+from ..scenes.shock import CD_MATERIALS, build_shock
+from .common import ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, write_csv, write_json
+
+PARAMS = [
+    Param("material", "Al", "material", kind="choice", choices=CD_MATERIALS),
+    ListParam("u", (0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0), "piston speeds", unit="km/s", low=0.0, high=20.0),
+    Param("size", (30, 3, 3), "piston sample (repeat cells)", kind="ints"),
+    Param("rest_size", (4, 4, 4), "periodic block of the u = 0 runs (repeat cells)", kind="ints"),
+    Param("rest_noise", 100.0, "thermal noise of the u = 0 runs", unit="m/s", low=0.0, low_open=True),
+    Param("rest_time", 20.0, "duration of the u = 0 runs, in r0/c0", low=0.0, low_open=True),
+    Param("noise", 10.0, "initial noise of the piston runs", unit="m/s", low=0.0),
+    Param("rc", 1.15, "cutoff (multiple of r0)", low=1.0, high=1.414, low_open=True),
+    Param("attraction", "all", "pair attraction", kind="choice", choices=("all", "initial")),
+    Param("energy_tol", 0.05, "largest energy error of a bounded run", low=0.0, low_open=True),
+    Param("bisections", 4, "bisection steps after the first failure", kind="int", low=0),
+    Param("seed", 1, "random seed", kind="int", low=0),
+    Param("plots", True, "write the PNG figure", kind="bool"),
+]
+
+COLUMNS = [("u", "u km/s", ".3g"), ("dt_default", "dt default", ".4f"), ("dt_limit", "dt limit", ".4f"),
+           ("margin", "limit/default", ".1f"), ("err_default", "E err default", ".2e"),
+           ("min_r", "min r/r0", ".3f"), ("dt_check", "check predicts", ".4f"),
+           ("dt_rest", "2/w_max rest", ".4f"), ("stopped_by", "first failure", ""), ("n_runs", "runs", "d")]
+
+
+class EnergyBalance:
+    """Observer: energy error ``E - E(0) - W_piston`` after every step (attach with interval 1)."""
+
+    def __init__(self, dyn, atoms, pistons):
+        self.dyn, self.atoms, self.pistons = dyn, atoms, pistons
+        self.E0 = None
+        self.W = 0.0
+        self.F_prev = None
+        self.errors = []
+        self.min_r = math.inf
+
+    def _piston_power(self):
+        return sum(-float(np.dot(p.force, p.velocity)) for p in self.pistons)
+
+    def __call__(self):
+        dyn = self.dyn
+        E = dyn.get_total_energy()
+        pw = self._piston_power()
+        if self.E0 is None:
+            self.E0 = E
+        else:
+            self.W += 0.5 * (self.F_prev + pw) * dyn.dt
+        self.F_prev = pw
+        self.errors.append(E - self.E0 - self.W)
+        st = dyn.calc.last_stats
+        if st is not None:
+            self.min_r = min(self.min_r, st["min_r_over_r0"])
+
+
+def _run(material, u, dt, v, rest_duration=None):
+    """One run at time step ``dt`` (ASE); returns dict(ok, err, min_r, stopped_by, steps)."""
+    if u > 0:
+        s = build_shock(material, u, "100", v["size"], 5 * units.um, v["rc"], None, v["noise"], v["seed"],
+                        TIMESTEP_FACTOR, attraction=v["attraction"])
+        atoms, dyn, calc = s.atoms, s.dyn, s.calc
+        pistons = [s.piston]
+        t_end = s.nsteps * s.dyn.dt
+    else:
+        atoms = fcc_packing(material, 5 * units.um, size=v["rest_size"], pbc=True)
+        calc = ClusterDynamics(rc=v["rc"])
+        if v["attraction"] == "initial":
+            from ..calculators import mark_initial_bonds
+            mark_initial_bonds(atoms, v["rc"])
+            calc = ClusterDynamics(rc=v["rc"], attraction="initial")
+        atoms.calc = calc
+        calc.setup(atoms)
+        thermal_noise(atoms, v["rest_noise"], v["seed"])
+        dyn = DampedVerlet(atoms, timestep=0.01 * calc.potentials[0].r0 / calc.potentials[0].c0, J=None)
+        pistons = []
+        t_end = rest_duration
+    # measure the integrator, not the stiffness check
+    dyn.check_interval = 10 ** 12
+    dyn.dt = dt
+    nsteps = max(10, int(math.ceil(t_end / dt)))
+    bal = EnergyBalance(dyn, atoms, pistons)
+    dyn.attach(bal, interval=1)
+    stopped = None
+    try:
+        with np.errstate(all="ignore"):
+            dyn.run(nsteps)
+    except InstabilityError as exc:
+        stopped = f"InstabilityError: {exc.quantity}"
+    errs = np.abs(np.array(bal.errors))
+    if u > 0:
+        scale = max(abs(bal.W), 1e-300)
+    else:
+        ke0 = 0.5 * v["rest_noise"] ** 2 * atoms.get_masses().sum()
+        scale = ke0
+    err = float(np.nanmax(errs) / scale) if len(errs) else math.inf
+    if not math.isfinite(err):
+        err = math.inf
+        stopped = stopped or "non-finite energy"
+    ok = stopped is None and err < v["energy_tol"]
+    if stopped is None and not ok:
+        stopped = f"energy error {err:.2g} > {v['energy_tol']:g}"
+    return {"ok": ok, "err": err, "min_r": bal.min_r, "stopped_by": stopped, "steps": len(errs) - 1,
+            "calc": calc}
+
+
+def find_limit(material, u, v, log=None):
+    """Largest bounded time step at piston speed ``u`` (ASE units); returns a summary dict."""
+    from ..potentials import ClusterPotential
+    pot = ClusterPotential(material, 5 * units.um, v["rc"])
+    r0c0 = pot.r0 / pot.c0
+    dt0 = TIMESTEP_FACTOR * pot.r0 / (pot.c0 + u)
+    rest_duration = v["rest_time"] * r0c0
+    runs = []
+    first = _run(material, u, dt0, v, rest_duration)
+    runs.append((dt0, first))
+    if log:
+        log(u, dt0 / r0c0, first)
+    good, bad = (dt0, first) if first["ok"] else (None, (dt0, first))
+    dt = dt0
+    if good is not None:
+        while True:
+            dt *= math.sqrt(2.0)
+            r = _run(material, u, dt, v, rest_duration)
+            runs.append((dt, r))
+            if log:
+                log(u, dt / r0c0, r)
+            if r["ok"]:
+                good = (dt, r)
+            else:
+                bad = (dt, r)
+                break
+            if dt > 5 * r0c0:
+                break
+        first_fail = bad[1]["stopped_by"] if bad is not None else None
+        for _ in range(v["bisections"]):
+            if bad is None:
+                break
+            mid = math.sqrt(good[0] * bad[0])
+            r = _run(material, u, mid, v, rest_duration)
+            runs.append((mid, r))
+            if log:
+                log(u, mid / r0c0, r)
+            if r["ok"]:
+                good = (mid, r)
+            else:
+                bad = (mid, r)
+    else:
+        first_fail = first["stopped_by"]
+    calc = first["calc"]
+    min_r = first["min_r"]
+    dt_check = stability_limit(calc, min(min_r, 1.0)) if math.isfinite(min_r) else stability_limit(calc)
+    return {"u": u / units.km_s, "dt_default": dt0 / r0c0, "dt_limit": (good[0] / r0c0) if good else float("nan"),
+            "margin": (good[0] / dt0) if good else float("nan"), "err_default": first["err"],
+            "min_r": min_r, "dt_check": dt_check / r0c0, "dt_rest": stability_limit(calc) / r0c0,
+            "stopped_by": first_fail, "n_runs": len(runs),
+            "scan": [{"dt_r0_c0": d / r0c0, "ok": r["ok"], "energy_error": r["err"], "min_r": r["min_r"],
+                      "stopped_by": r["stopped_by"], "steps": r["steps"]} for d, r in runs]}
+
+
+def stability_study(overrides=None, out=None, progress=True, quiet=None):
+    """Run the stability study (see the module docstring); returns a JSON-ready dict."""
+    t_start = time.perf_counter()
+    quiet = (not progress) if quiet is None else quiet
+    v, _ = parse_params(PARAMS, overrides, study="stability")
+    mat = v["material"]
+    folder = out_folder(out, "stability", mat)
+    bar = progress_bar(len(v["u"]), f"stability {mat}", progress)
+    rows = []
+    for u in v["u"]:
+        if bar is not None:
+            bar.set_postfix_str(f"u={u:g} km/s")
+        rows.append(find_limit(mat, u * units.km_s, v))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    lim = [r["dt_limit"] for r in rows if np.isfinite(r["dt_limit"])]
+    text = [format_table(rows, COLUMNS, f"time-step limit of {mat} (rc = {v['rc']:g}, attraction = "
+                                        f"{v['attraction']}); time steps in r0/c0; bounded = no instability "
+                                        f"and energy error < {v['energy_tol']:g}")]
+    if lim:
+        text.append(f"smallest margin of the default time step (0.03 r0/(c0 + u)) below the measured limit: "
+                    f"{min(r['margin'] for r in rows if np.isfinite(r['margin'])):.1f}x")
+    files = [write_csv(folder / "stability.csv", [{k: x for k, x in r.items() if k != "scan"} for r in rows])]
+    if v["plots"]:
+        files.append(_plot(folder / "stability.png", rows, mat))
+    result = {"study": "stability", "material": mat, "rows": rows, "markdown": markdown_table(rows, COLUMNS),
+              "wall_time_s": time.perf_counter() - t_start}
+    files.append(write_json(folder / "stability.json", result))
+    result["files"] = [str(f) for f in files]
+    text.append("wrote " + ", ".join(str(f) for f in files))
+    if not quiet:
+        print("\n\n".join(text))
+    return result
+
+
+def _plot(path, rows, mat):
+    from ..scenes.common import matplotlib_agg
+    plt = matplotlib_agg()
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    u = [r["u"] for r in rows]
+    ax.plot(u, [r["dt_limit"] for r in rows], "o-", label="measured limit (bounded energy)")
+    ax.plot(u, [r["dt_check"] for r in rows], "s--", label="stiffness check at the closest approach")
+    ax.plot(u, [r["dt_default"] for r in rows], "k-", label="default 0.03 r0/(c0 + u)")
+    ax.axhline(rows[0]["dt_rest"], color="0.5", ls=":", label="2/omega_max at rest")
+    ax.set_yscale("log")
+    ax.set_xlabel("piston speed u (km/s)")
+    ax.set_ylabel("time step (r0/c0)")
+    ax.set_title(f"velocity-Verlet stability, {mat} [100]")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
