@@ -77,16 +77,16 @@ def binned_profile(atoms, virials=None, axis=0, width=None, lo=None, hi=None, ex
             "von_mises": von_mises(stress), "width": width, "area": area}
 
 
-def front_position(x, u_axis, u_piston, fraction=0.5, support=2):
+def front_position(x, u_axis, u_piston, fraction=0.5, support=0):
     """Position of the shock front along the profile.
 
     The furthest slab whose particle velocity reaches ``fraction * u_piston``
     and is backed by ``support`` slabs behind it that reach it too, searched
-    from the far end; linear interpolation to the next slab.  The support
-    keeps single slabs of clusters thrown ahead of the front (planes slipping
-    through each other at high u) from being taken for the front; they are
-    counted by :func:`ejecta_ahead`.  ``support=0`` gives the plain furthest
-    crossing.
+    from the far end; linear interpolation to the next slab.  ``support=0``
+    (default) is the plain furthest crossing, which follows the leading
+    oscillation of a weak lattice shock; ``support=2`` skips single slabs of
+    clusters thrown ahead of the front (planes slipping through each other at
+    high u), which :func:`ejecta_ahead` counts.
     """
     thr = fraction * u_piston
     ok = np.asarray(u_axis) >= thr
@@ -176,8 +176,9 @@ class ShockState:
     steady_reasons : list of str
         Why the run is not steady (empty when it is).
     ejecta : float
-        Mean mass moving faster than half the piston speed ahead of the front
-        (clusters thrown ahead), in slabs of material at rest.
+        Mean mass moving faster than half the piston speed ahead of the main
+        front (the front found with ``support=2``: clusters thrown ahead, or
+        the leading oscillation of a weak shock), in slabs of material at rest.
     """
 
     D_fit: float
@@ -248,6 +249,9 @@ class ShockTracker:
     behind_gap, piston_gap : float
         Gaps (slab widths) that keep the front's ramp and the piston's
         start-up out of the averaged region.
+
+    The first frame added is the reference configuration (the Lagrangian
+    coordinates ``X0`` of the compression ``dx/dX``): add it before the run starts.
     """
 
     def __init__(self, rho0, u_piston, width, axis=0, lo=None, hi=None, rest_volume=None,
@@ -287,8 +291,9 @@ class ShockTracker:
         prof = binned_profile(atoms, virials, ax, self.width, self.lo, self.hi, exclude)
         u_ax = prof["velocity"][:, ax]
         xf = front_position(prof["x"], u_ax, self.u_piston)
+        x2 = front_position(prof["x"], u_ax, self.u_piston, support=2)
         frame = {"t": float(time), "front": float(xf), "piston": float(piston_x), "profile": prof,
-                 "ejecta_mass": ejecta_ahead(prof, xf, ax, u_piston=self.u_piston) if np.isfinite(xf) else 0.0}
+                 "ejecta_mass": ejecta_ahead(prof, x2, ax, u_piston=self.u_piston) if np.isfinite(x2) else 0.0}
         frame.update(self._region(atoms, virials, prof, xf, piston_x, exclude))
         self.frames.append(frame)
         return xf
@@ -391,7 +396,7 @@ class ShockTracker:
               for f, ok in zip(self.frames, use) if ok]
         ejecta = float(np.mean(ej)) if ej else 0.0
         if ejecta > 0.05:
-            notes.append(f"clusters thrown ahead of the front: {ejecta:.2f} slabs of material on average")
+            notes.append(f"fast material ahead of the main front: {ejecta:.2f} slabs of material on average")
         steady = not reasons
         if not steady:
             notes.append("run not steady: " + "; ".join(reasons))

@@ -103,7 +103,7 @@ def place_spheres(box, diameters, gap=0.0, periodic=(True, True, True), seed=1, 
 
 def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units.um, size=(60, 12, 12),
               direction=(1, 0, 0), pbc=(False, True, True), seed=1, r0_inclusion=None,
-              diameter_spread=0.0, gap=None, d_min=0.9):
+              diameter_spread=0.0, gap=0.0, d_min=0.9):
     """A block of ``matrix`` clusters with spherical ``inclusion`` particles, fcc packed.
 
     Parameters
@@ -138,7 +138,7 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
         Relative standard deviation of the diameters (0 = all equal);
         diameters are drawn from a normal law clipped to +- 2 spreads.
     gap : float, optional
-        Smallest distance between two sphere surfaces (default r0).
+        Smallest distance between two sphere surfaces, Angstrom (default 0: spheres may touch).
 
     Returns
     -------
@@ -161,7 +161,7 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
     D = check_positive("inclusion_diameter", inclusion_diameter)
     r0 = check_positive("r0", r0)
     r0i = r0 if r0_inclusion is None else check_positive("r0_inclusion", r0_inclusion)
-    gap = r0 if gap is None else float(gap)
+    gap = float(gap)
     if not 0.0 <= diameter_spread < 0.5:
         raise InputError("diameter_spread", diameter_spread, "a relative spread in [0, 0.5)")
     key = parse_direction(direction)

@@ -272,3 +272,18 @@ def shock_row(res, err=None, wall=None):
         "stepping_s": x.get("stepping_time_s"), "ejecta": x.get("ejecta_fraction"), "error": None,
     }
     return row
+
+
+def pareto_front(cost, err):
+    """Indices of the runs not beaten in both cost and |err| by another run, by cost."""
+    cost = np.asarray(cost, float)
+    err = np.abs(np.asarray(err, float))
+    ok = np.isfinite(cost) & np.isfinite(err)
+    idx = [i for i in np.argsort(cost) if ok[i]]
+    front, best = [], math.inf
+    for i in idx:
+        if err[i] < best:
+            front.append(int(i))
+            best = err[i]
+    return front
+

@@ -30,7 +30,7 @@ from .. import units
 from ..errors import InputError
 from ..scenes import get_scene
 from ..scenes.base import Param
-from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
+from .common import (ListParam, format_table, markdown_table, out_folder, pareto_front, parse_params, progress_bar,
                      run_scene, shock_row, write_csv, write_json)
 
 
@@ -80,20 +80,6 @@ COLUMNS = [("sweep", "sweep", ""), ("value", "value", ""), ("size", "size", ""),
            ("D", "D km/s", ".4f"), ("D_err", "+-", ".3f"), ("err_ref", "err exp", "+.2%"),
            ("err_finest", "err finest", "+.2%"), ("steady", "steady", ""), ("wall_s", "wall s", ".2f"),
            ("particle_steps", "p-steps", ".3g"), ("pareto", "Pareto", "")]
-
-
-def pareto_front(cost, err):
-    """Indices of the runs not beaten in both cost and |err| by another run, by cost."""
-    cost = np.asarray(cost, float)
-    err = np.abs(np.asarray(err, float))
-    ok = np.isfinite(cost) & np.isfinite(err)
-    idx = [i for i in np.argsort(cost) if ok[i]]
-    front, best = [], math.inf
-    for i in idx:
-        if err[i] < best:
-            front.append(int(i))
-            best = err[i]
-    return front
 
 
 def convergence_study(overrides=None, out=None, progress=True, quiet=None):
