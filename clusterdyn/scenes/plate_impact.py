@@ -272,6 +272,10 @@ def analyse_impact(setup, run):
     behind = (x > xi + 1.5 * w) & (x < main[f] - 2.5 * w) & (prof["count"][f] > 0)
     front = (x > main[f] - 3 * w) & (x < main[f] + 2 * w)
     vm = prof["von_mises"][f]
+    # the target at rest (frame 0, before contact): residual stress of the sample, the floor
+    # under any plateau (a polycrystal's few grains per slab leave a few tenths of a GPa)
+    rest = (x > xi + 1.5 * w) & (x < xr - 1.5 * w) & (prof["count"][0] > 0)
+    vm_rest = float(np.median(prof["von_mises"][0, rest])) if rest.any() else np.nan
     vm_plateau = float(np.median(vm[behind])) if behind.any() else np.nan
     vm_front = float(vm[front].max()) if front.any() else np.nan
     sxx = float(np.median(-prof["stress"][f, behind, 0])) if behind.any() else np.nan
@@ -296,7 +300,7 @@ def analyse_impact(setup, run):
                 fsv_min = float(fv[after].min())
                 pullback = fsv_plateau - fsv_min
     return {"frame": f, "t_state": t[f], "main": main, "pre": pre, "plateau": plateau,
-            "D_main": D_main, "D_pre": D_pre, "vm_plateau": vm_plateau, "vm_front": vm_front,
+            "D_main": D_main, "D_pre": D_pre, "vm_plateau": vm_plateau, "vm_front": vm_front, "vm_rest": vm_rest,
             "sxx_plateau": sxx, "u_behind": u_behind, "precursor_amp": precursor_amp,
             "fsv_plateau": fsv_plateau, "fsv_min": fsv_min, "pullback": pullback, "t_arrival": t_arrival,
             "separated": _separated(setup), "tau": tau}
@@ -441,6 +445,8 @@ def impact_quantities(name, setup, an, mat):
         p + "sigma_u_plateau": Quantity(an["vm_plateau"] / units.GPa, "GPa",
                                         note="von Mises intensity behind the front (median of slabs)"),
         p + "sigma_u_front": Quantity(an["vm_front"] / units.GPa, "GPa", note="intensity peak at the front"),
+        p + "sigma_u_rest": Quantity(an["vm_rest"] / units.GPa, "GPa",
+                                     note="intensity in the target before the impact (residual stress)"),
         p + "sigma_xx_plateau": Quantity(an["sxx_plateau"] / units.GPa, "GPa", Pref,
                                          note="-sigma_xx behind the front vs rho0 D u (Al-1100, u = v/2)"),
         p + "u_behind": Quantity(an["u_behind"] / units.m_s, "m/s", u / units.m_s,
