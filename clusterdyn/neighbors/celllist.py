@@ -312,20 +312,21 @@ def _compact(nbr_nk, img_nk, cnt_n, first_n, j_p, img_p):
             img_p[p + q] = img_nk[i, q]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def gather_positions(pos_nc, perm, offs_nc, xs_nc):
-    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels."""
-    for k in prange(perm.shape[0]):
+    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels (one thread:
+    a streaming pass is not worth a parallel region, see clusterdyn.md._integrate)."""
+    for k in range(perm.shape[0]):
         i = perm[k]
         xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
         xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
         xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def gather_velocities(p_nc, invm_n, perm, vs_nc):
-    """vs[k] = p[perm[k]] / m[perm[k]]."""
-    for k in prange(perm.shape[0]):
+    """vs[k] = p[perm[k]] / m[perm[k]] (one thread)."""
+    for k in range(perm.shape[0]):
         i = perm[k]
         w = invm_n[i]
         vs_nc[k, 0] = p_nc[i, 0] * w
@@ -333,7 +334,7 @@ def gather_velocities(p_nc, invm_n, perm, vs_nc):
         vs_nc[k, 2] = p_nc[i, 2] * w
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _displacement(pos_nc, ref_nc, out2):
     """(max |d|^2, squared half-diagonal of the bounding box of the displacements d).
 
@@ -344,7 +345,7 @@ def _displacement(pos_nc, ref_nc, out2):
     """
     n = pos_nc.shape[0]
     nt = out2.shape[0]
-    for t in prange(nt):
+    for t in range(nt):
         a = t * n // nt
         b = (t + 1) * n // nt
         m = 0.0
@@ -476,7 +477,7 @@ class NeighborList:
         self._cell = None
         self._pbc = None
         self._cap = 0
-        self._disp = np.zeros((64, 7))
+        self._disp = np.zeros((1, 7))
 
     def update(self, positions, cell, pbc):
         """Rebuild if needed; return True when rebuilt."""
