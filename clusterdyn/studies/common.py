@@ -1,6 +1,7 @@
 """Pieces shared by the studies: parameters (with lists), running scenes, tables, files."""
 
 import csv
+import hashlib
 import json
 import math
 import time
@@ -198,17 +199,28 @@ def load_result(path):
     return res
 
 
-def run_scene(scene, overrides, progress=False, desc=None, folder=None, reuse=True):
+def run_folder(cache, scene, overrides):
+    """``cache/<scene>-<12 hex digits>``: one folder per parameter set (hash of the parsed values)."""
+    params = _jsonable(scene.display(scene.parse(overrides)))
+    h = hashlib.sha1(json.dumps(params, sort_keys=True).encode()).hexdigest()[:12]
+    return Path(cache) / f"{scene.name}-{h}"
+
+
+def run_scene(scene, overrides, progress=False, desc=None, folder=None, reuse=True, cache=None):
     """Run a scene once; returns (SceneResult or None, error text or None, wall time s).
 
     An :class:`~clusterdyn.errors.InstabilityError` is caught and returned as
-    text: a study records the failed run and goes on.  With ``folder`` the
-    result (or the error) is written there as JSON, and with ``reuse`` a run
-    whose folder already holds the result of the same parameters is read back
-    instead of run again (a study interrupted or extended resumes where it was).
+    text: a study records the failed run and goes on.  With ``folder`` (or
+    ``cache``: the folder is then :func:`run_folder`) the result (or the
+    error) is written there as JSON, and with ``reuse`` a run whose folder
+    already holds the result of the same parameters is read back instead of
+    run again: a study interrupted or extended resumes where it was, and
+    studies sharing a cache share their runs.
     """
     from ..errors import InstabilityError
     params = _jsonable(scene.display(scene.parse(overrides)))
+    if folder is None and cache is not None:
+        folder = run_folder(cache, scene, overrides)
     if folder is not None and reuse:
         folder = Path(folder)
         for name in ("result.json", "error.json"):

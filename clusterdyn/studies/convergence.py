@@ -72,6 +72,8 @@ PARAMS = [
     ListParam("noises", (0.0, 2.0, 10.0, 30.0), "initial noise amplitudes", unit="m/s", low=0.0, optional=True),
     ListParam("r0s", (1.0, 5.0, 25.0), "cluster sizes at fixed geometry in cells", unit="um", low=0.0,
               low_open=True, optional=True),
+    Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",
+          kind="str", optional=True),
     Param("plots", True, "write the PNG figure", kind="bool"),
 ]
 
@@ -142,7 +144,7 @@ def convergence_study(overrides=None, out=None, progress=True, quiet=None):
                    "noise": s["noise"], "r0": s["r0"]})
         if bar is not None:
             bar.set_postfix_str(f"{sweep} {label}")
-        res, err, wall = run_scene(scene, ov, progress=progress, folder=folder / "runs" / f"{n:02d}")
+        res, err, wall = run_scene(scene, ov, progress=progress, cache=v["cache"] or folder / "runs")
         done[key(s)] = shock_row(res, err, wall)
         if bar is not None:
             bar.update(1)

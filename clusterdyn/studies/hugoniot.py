@@ -29,6 +29,7 @@ rc, J, noise, seed, dt_factor, frames, attraction, ...) is passed to every run.
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -68,6 +69,10 @@ PARAMS = [
     ListParam("phase_u", (8.0,), "extra piston speeds for the pure-phase Hugoniots of a two-phase sample "
               "(the equal-pressure closure needs them beyond the sweep)", unit="km/s", low=0.0, low_open=True,
               optional=True),
+    Param("phase_size", None, "sample of the pure-phase runs of a two-phase study (default: the sample's)",
+          kind="ints", optional=True),
+    Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",
+          kind="str", optional=True),
     Param("uniaxial", True, "static uniaxial-compression check of the longitudinal stress", kind="bool"),
     Param("plots", True, "write the PNG figures", kind="bool"),
 ]
@@ -158,7 +163,7 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     mat = v["material"]
     tag = (f"{mat}+{sv['inclusion']}" if two else mat) + (f"-{sv['direction']}" if sv["direction"] != "100" else "")
     folder = out_folder(out, "hugoniot", tag)
-    runs_dir = folder / "runs"
+    cache = Path(v["cache"]) if v["cache"] else folder / "runs"
 
     # ---- the list of runs
     plan = []     # (group, overrides)
@@ -182,6 +187,8 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     if two:
         pu = sorted(set(v["u"]) | set(v["phase_u"] or ()))
         pure = {k: x for k, x in fwd.items() if not k.startswith("inclusion")}
+        if v["phase_size"] is not None:
+            pure["size"] = "x".join(map(str, v["phase_size"]))
         phases = {"matrix": mat, "inclusion": sv["inclusion"]}
         for role, m in phases.items():
             for u in pu:
@@ -192,7 +199,7 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     for n, (group, ov) in enumerate(plan):
         if bar is not None:
             bar.set_postfix_str(f"{group} u={ov['u']}")
-        res, err, wall = run_scene(scene, ov, progress=progress, folder=runs_dir / f"{n:02d}")
+        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache)
         row = shock_row(res, err, wall)
         pv = scene.display(scene.parse(ov))
         row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
