@@ -48,6 +48,22 @@ from .common import (ListParam, format_table, markdown_table, out_folder, parse_
 
 DEFAULT_U = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
 
+
+class SizeParam(Param):
+    """An optional sample size ``NXxNYxNZ`` (repeat cells); ``none`` = not given."""
+
+    def __init__(self, name, default, doc):
+        super().__init__(name, default, doc, kind="ints", optional=True)
+
+    def describe(self):
+        d = "none" if self.default is None else "x".join(map(str, self.default))
+        return f"{self.name} = {d}  -- {self.doc}"
+
+    def parse(self, value):
+        if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off", "")):
+            return None
+        return Param(self.name, (1, 1, 1), self.doc, kind="ints").parse(value)
+
 #: longitudinal sound speed of the nearest-neighbour fcc lattice along the shock direction, in c0
 #: (physics.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
 LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
@@ -69,8 +85,7 @@ PARAMS = [
     ListParam("phase_u", (8.0,), "extra piston speeds for the pure-phase Hugoniots of a two-phase sample "
               "(the equal-pressure closure needs them beyond the sweep)", unit="km/s", low=0.0, low_open=True,
               optional=True),
-    Param("phase_size", None, "sample of the pure-phase runs of a two-phase study (default: the sample's)",
-          kind="ints", optional=True),
+    SizeParam("phase_size", None, "sample of the pure-phase runs of a two-phase study (default: the sample's)"),
     Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",
           kind="str", optional=True),
     Param("uniaxial", True, "static uniaxial-compression check of the longitudinal stress", kind="bool"),
@@ -178,7 +193,8 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     if v["low_u"]:
         lsize = "x".join(map(str, v["low_u_size"]))
         for u in v["low_u"]:
-            plan.append(("low-u", _fwd_with(fwd, material=mat, u=u, size=lsize, noise=v["low_u_noise"],
+            noise = f"{v['low_u_noise'] / units.m_s:g}m/s"
+            plan.append(("low-u", _fwd_with(fwd, material=mat, u=u, size=lsize, noise=noise,
                                              frames=v["low_u_frames"])))
         # the same weakest shock with the sweep's noise, to show what the noise does there
         plan.append(("low-u noise check", _fwd_with(fwd, material=mat, u=min(v["low_u"]), size=lsize,
@@ -397,7 +413,7 @@ def _uniaxial(mat, sv, two):
     if two:
         return None
     m = get_material(mat)
-    deltas = np.round(np.arange(1.0, 1.625, 0.025), 4)[1:]
+    deltas = np.round(np.arange(1.0, 2.0125, 0.025), 4)[1:]
     s_all = uniaxial_stress(mat, deltas, sv["direction"], sv["rc"], "all")
     s_ini = uniaxial_stress(mat, deltas, sv["direction"], sv["rc"], "initial")
     Px = np.array([m.curve.pressure(d) for d in deltas])
@@ -423,8 +439,10 @@ def _uniaxial(mat, sv, two):
     cols = [("delta", "rho/rho0", ".3f"), ("sigma_all_GPa", "-s_xx all GPa", ".2f"),
             ("sigma_initial_GPa", "-s_xx initial GPa", ".2f"), ("P_cold_GPa", "P_x cold GPa", ".2f"),
             ("P_hugoniot_exp_GPa", "P Hugoniot exp GPa", ".2f")]
-    text = [format_table(rows, cols, f"static uniaxial compression along [{sv['direction']}] (rc = {sv['rc']:g}): "
-                                     "longitudinal stress")]
+    shown = [r for r in rows if abs(r["delta"] * 20 - round(r["delta"] * 20)) < 1e-6
+             or 1.2 <= r["delta"] <= 1.45]
+    text = [format_table(shown, cols, f"static uniaxial compression along [{sv['direction']}] (rc = {sv['rc']:g}): "
+                                      "longitudinal stress (all rows in uniaxial.csv)")]
     if note:
         text.append(note)
     if dec:
