@@ -253,6 +253,12 @@ def stability_study(overrides=None, out=None, progress=True, quiet=None):
     text = [format_table(rows, COLUMNS, f"time-step limit of {mat} (rc = {v['rc']:g}, attraction = "
                                         f"{v['attraction']}); time steps in r0/c0; bounded = no instability "
                                         f"and energy error < {v['energy_tol']:g}")]
+    for r in rows:
+        if not np.isfinite(r["dt_limit"]):
+            kinds = {x["stopped_by"] for x in r["scan"]}
+            text.append(f"u = {r['u']:g} km/s: no bounded time step down to 1/64 of the default; every run "
+                        f"stopped ({'; '.join(sorted(k for k in kinds if k))}): compression beyond the "
+                        "potential's range, not a time-step limit")
     if lim:
         text.append(f"smallest margin of the default time step below the measured limit: "
                     f"{min(r['margin'] for r in rows if np.isfinite(r['margin'])):.1f}x")
