@@ -106,21 +106,43 @@ def cold_shock_state(material, u):
     return d, math.sqrt(c.dpressure(d) / mat.rho0)
 
 
+def _compression_at(material, P):
+    """Compression where the cold curve reaches pressure ``P`` (ASE units)."""
+    from scipy.optimize import brentq
+    c = get_material(material).curve
+    hi = 1.5
+    while c.pressure(hi) < P and hi < 1e3:
+        hi *= 1.5
+    return brentq(lambda d: c.pressure(d) - P, 1.0, hi, xtol=1e-12)
+
+
 def shock_timestep(calc, u, dt_factor=TIMESTEP_FACTOR):
     """Time step of a shock at piston speed ``u``: ``dt_factor * min r0/(c_eff + u)`` over the materials.
 
-    ``c_eff = max(c0, c_s/STIFF_SLACK)`` with ``c_s`` the sound speed at the
-    cold shock compression (:func:`cold_shock_state`).  This is
+    One material: ``c_eff = max(c0, c_s/STIFF_SLACK)`` with ``c_s`` the sound
+    speed at the cold shock compression (:func:`cold_shock_state`).  This is
     :func:`clusterdyn.md.default_timestep`'s ``r0/(c0 + u)`` for B4C at any u,
     aluminium up to 4 km/s and lead up to 2 km/s; it is 7% smaller for
     aluminium at 6-8 km/s, 7-17% for lead at 3-8 km/s and 13-54% for h-BN
     (n = 10.4: c_s = 8 c0 at 6 km/s) at 1-8 km/s, where ``r0/(c0 + u)``
     leaves no margin below the limit ``clusterdyn study stability`` measures.
+
+    Several materials: each phase may be driven to the highest cold shock
+    pressure of any phase at ``u`` (a soft matrix squeezed against stiff
+    inclusions), and interfaces focus the compression, so ``c_eff =
+    max(c0, c_s)`` with ``c_s`` at that pressure on the phase's own cold curve
+    (h-BN with B4C spheres at 3 km/s: closest pairs at 0.75 r0 in the matrix).
     """
+    states = [cold_shock_state(p.material, u) for p in calc.potentials]
+    if len(calc.potentials) == 1:
+        p = calc.potentials[0]
+        return dt_factor * p.r0 / (max(p.c0, states[0][1] / STIFF_SLACK) + u)
+    P_max = max(p.material.curve.pressure(d) for p, (d, _) in zip(calc.potentials, states))
     dt = math.inf
     for p in calc.potentials:
-        _, cs = cold_shock_state(p.material, u)
-        dt = min(dt, dt_factor * p.r0 / (max(p.c0, cs / STIFF_SLACK) + u))
+        d = _compression_at(p.material, P_max) if P_max > 0 else 1.0
+        cs = math.sqrt(p.material.curve.dpressure(d) / p.material.rho0)
+        dt = min(dt, dt_factor * p.r0 / (max(p.c0, cs) + u))
     return dt
 
 
