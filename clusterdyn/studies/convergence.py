@@ -219,6 +219,10 @@ def _plot(path, rows, front_f, front_e, mat, u):
                                 (axs[1], "err_ref", front_e, "|D / D_exp - 1|")):
         for k, sw in enumerate(sweeps):
             rr = [r for r in rows if r["sweep"] == sw and r.get(key) is not None and np.isfinite(r[key])]
+            if sw == "finest" and key == "err_finest":
+                for r in rr:
+                    ax.axvline(r["wall_s"], color=f"C{k}", ls="--", lw=1, label=f"finest ({r['value']})")
+                continue
             if not rr:
                 continue
             ax.scatter([r["wall_s"] for r in rr], [max(abs(r[key]), 1e-6) for r in rr], marker=marks[sw],
@@ -237,7 +241,7 @@ def _plot(path, rows, front_f, front_e, mat, u):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     axs[0].set_title(f"{mat}, u = {u:g} km/s: error against the finest run")
-    axs[1].set_title("error against the experimental Hugoniot")
+    axs[1].set_title("error against the experimental Hugoniot (model + numerical error)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
