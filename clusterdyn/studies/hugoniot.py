@@ -4,7 +4,9 @@ Sweeps the piston speed of the ``shock`` scene (default 0.5, 1, 1.5, 2, 3, 4,
 6 km/s) and writes, in ``--out`` (default ``runs/hugoniot-<material>``):
 
 * ``hugoniot.csv`` -- every run (group, u, D from the front fit with its
-  error, the experimental D and the relative error, D from mass
+  error, the experimental D and the relative error, ``D_cold`` where the
+  cold curve meets the Rayleigh line of the piston speed (the model's own
+  zero-temperature Hugoniot: what a CD lattice can at best reproduce), D from mass
   conservation, u behind the front, P = -sigma_xx against rho0 D u, rho, von
   Mises intensity, fit residual, steadiness, wall time, particle-steps);
 * ``hugoniot_du.png`` and ``hugoniot_prho.png`` -- D-u and P-rho with the
@@ -42,7 +44,7 @@ from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..scenes import get_scene
 from ..scenes.base import Param
-from ..scenes.shock import CD_MATERIALS
+from ..scenes.shock import CD_MATERIALS, cold_shock_state
 from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
                      run_scene, shock_row, write_csv, write_json)
 
@@ -94,7 +96,7 @@ PARAMS = [
 
 MAIN_COLUMNS = [
     ("u_piston", "u_p km/s", ".3g"), ("D", "D km/s", ".4f"), ("D_err", "+-", ".3f"),
-    ("D_ref", "D_exp", ".4f"), ("err_ref", "err", "+.2%"), ("D_mass", "D_mass", ".4f"),
+    ("D_ref", "D_exp", ".4f"), ("err_ref", "err", "+.2%"), ("D_cold", "D_cold", ".4f"), ("D_mass", "D_mass", ".4f"),
     ("mass_check", "mass", "+.2%"), ("u", "u km/s", ".4f"), ("u_dev", "u/u_p-1", "+.2%"),
     ("P", "P GPa", ".2f"), ("P_momentum", "rho0Du", ".2f"), ("momentum_check", "P/rho0Du-1", "+.2%"),
     ("rho", "rho g/cm3", ".4f"), ("sigma_u", "sig_u GPa", ".3g"), ("fit_rms_slabs", "rms slab", ".3f"),
@@ -221,6 +223,9 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
         row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
                     "J": pv["J"], "attraction": pv["attraction"], "noise_m_s": pv["noise"]["value"],
                     "size": "x".join(map(str, pv["size"])), "direction": pv["direction"]})
+        if not (res is not None and "two_phase" in res.extra):
+            d_c, _ = cold_shock_state(ov["material"], float(ov["u"]) * units.km_s)
+            row["D_cold"] = float(ov["u"]) / (1.0 - 1.0 / d_c)
         if res is not None and "two_phase" in res.extra:
             row["inclusion_mass_fraction"] = res.extra["two_phase"]["mass_fraction"]
             row["inclusion_volume_fraction"] = res.extra["two_phase"]["volume_fraction"]
