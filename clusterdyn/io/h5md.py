@@ -38,13 +38,14 @@ other source for ``Timestep.dt`` (it would warn and assume 1 ps); it takes
 
 Positions and images
 --------------------
-Positions are written exactly as ``atoms.positions`` holds them; no
-``image`` group is written.  ASE's integrators never wrap positions, so
-during a run these are *unwrapped* coordinates: MDAnalysis reads them as
-they are (its analyses wrap on demand, e.g. ``AtomGroup.wrap()``), the
-displacement of a particle across the whole run stays meaningful (fragments,
-ejecta, diffusion), and :func:`read_h5md` returns bit-identical positions.
-If a caller wraps the Atoms itself, the written positions are wrapped too.
+With periodic axes (and the default ``wrap=True``) positions are written
+wrapped into the box with an integer ``image`` series, as H5MD prescribes:
+the unwrapped position is ``position + image @ box``.  MDAnalysis reads the
+wrapped coordinates; :func:`read_h5md` gives back unwrapped positions
+(ASE's integrators never wrap), so the displacement of a particle across the
+whole run (fragments, ejecta, diffusion) stays available.  With
+``wrap=False``, or without periodic axes, positions are written exactly as
+``atoms.positions`` holds them and no ``image`` is stored.
 
 Ordering
 --------
@@ -260,7 +261,7 @@ class H5MDWriter:
 
     def __init__(self, path, atoms, *, mode="w", dyn=None, timestep=None,
                  observables=None, per_particle=None, compression="gzip",
-                 sort_by_id=True, restart_step=None, parameters=None, author=None):
+                 sort_by_id=True, restart_step=None, parameters=None, author=None, wrap=True):
         import h5py
 
         if mode not in ("w", "a"):
@@ -287,6 +288,7 @@ class H5MDWriter:
         self.timestep = units.PS if timestep is None else float(timestep)
         self.compression = compression
         self.sort_by_id = bool(sort_by_id)
+        self.wrap = bool(wrap) and bool(np.any(atoms.pbc))
         self.natoms = len(atoms)
         self._user_observables = dict(observables or {})
         self._user_per_particle = dict(per_particle or {})
@@ -452,6 +454,7 @@ class H5MDWriter:
             atoms.calc, "implemented_properties", ("forces",))
         return {"edges": bool(np.any(cell != 0.0)),
                 "force": has_force,
+                "image": self.wrap,
                 "particles": self._particle_specs(atoms),
                 "observables": self._observable_specs(atoms)}
 
@@ -460,6 +463,8 @@ class H5MDWriter:
         want_p = {"position", "velocity", "species", "mass"} | set(layout["particles"])
         if layout["force"]:
             want_p.add("force")
+        if layout["image"]:
+            want_p.add("image")
         have_p = set(fl["particles"])
         problems = []
         if want_p != have_p:
@@ -520,6 +525,8 @@ class H5MDWriter:
         self._new_value(traj, "velocity", frame["velocity"], UNITS["velocity"])
         if "force" in frame:
             self._new_value(traj, "force", frame["force"], UNITS["force"])
+        if "image" in frame:
+            self._new_value(traj, "image", frame["image"])
         self._new_value(traj, "species", frame["species"])
         self._new_value(traj, "mass", frame["mass"], UNITS["mass"])
         for name, (_, unit) in self._layout["particles"].items():
@@ -616,10 +623,18 @@ class H5MDWriter:
             a = np.asarray(a)
             return a if order is None else a[order]
 
-        frame = {"position": rows(atoms.positions).astype(np.float64),
+        pos = np.asarray(atoms.positions, dtype=np.float64)
+        if layout["image"]:
+            # H5MD images: wrapped position + image @ box = unwrapped position
+            img = np.floor(np.linalg.solve(np.asarray(atoms.cell[:]).T, pos.T).T)
+            img[:, ~np.asarray(atoms.pbc, dtype=bool)] = 0.0
+            pos = pos - img @ np.asarray(atoms.cell[:], dtype=np.float64)
+        frame = {"position": rows(pos),
                  "velocity": rows(atoms.get_velocities()) * units.VEL_TO_A_PER_PS,
                  "species": rows(atoms.numbers),
                  "mass": rows(atoms.get_masses()).astype(np.float64)}
+        if layout["image"]:
+            frame["image"] = rows(img.astype(np.int32))
         if layout["edges"]:
             frame["edges"] = np.array(atoms.cell[:], dtype=np.float64)
         elif np.any(np.asarray(atoms.cell[:]) != 0.0):
@@ -672,6 +687,8 @@ class H5MDWriter:
                  ("species", frame["species"], traj), ("mass", frame["mass"], traj)]
         if "force" in frame:
             items.append(("force", frame["force"], traj))
+        if "image" in frame:
+            items.append(("image", frame["image"], traj))
         items += [(k, v, traj) for k, v in frame["particles"].items()]
         if frame["observables"]:
             items += [(k, v, self._file["observables"]) for k, v in frame["observables"].items()]
@@ -742,6 +759,8 @@ class H5MDWriter:
             traj["box/edges/value"][i] = frame["edges"]
         if "force" in frame:
             traj["force/value"][i] = frame["force"]
+        if "image" in frame:
+            traj["image/value"][i] = frame["image"]
         for name, val in frame["particles"].items():
             traj[name]["value"][i] = val
         for name, val in frame["observables"].items():
@@ -911,7 +930,7 @@ class H5MDReader:
     @property
     def per_particle(self):
         return [k for k in self._elements
-                if k not in ("position", "velocity", "force", "species", "mass")]
+                if k not in ("position", "velocity", "force", "species", "mass", "image")]
 
     @property
     def has(self):
@@ -1026,6 +1045,8 @@ class H5MDReader:
                     ev, edges = e, e[()]
                 edges = np.asarray(edges, dtype=np.float64) * _unit_factor("length", ev, self.path)
                 cell = np.diag(edges) if edges.shape == (3,) else edges
+            if "image" in self._elements:          # back to unwrapped positions
+                pos = pos + g["image"]["value"][i].astype(np.float64) @ cell
             atoms = Atoms(numbers=numbers, positions=pos, cell=cell, pbc=self.pbc)
             if "mass" in self._elements:
                 atoms.set_masses(g["mass"]["value"][i].astype(np.float64))

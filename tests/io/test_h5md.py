@@ -38,7 +38,10 @@ def test_mdanalysis_reads_without_topology(md_file):
     assert u.trajectory.n_frames == len(rec.frames) == 6
     for ts, ref in zip(u.trajectory, rec.frames):
         # MDAnalysis holds float32; compare at float32 precision
-        np.testing.assert_allclose(ts.positions, ref["positions"], rtol=1e-6, atol=1e-5)
+        # periodic box: MDAnalysis reads the wrapped positions
+        L = np.diag(np.asarray(atoms.cell[:]))
+        wrapped = ref["positions"] - np.floor(ref["positions"] / L) * L
+        np.testing.assert_allclose(ts.positions, wrapped, rtol=1e-6, atol=1e-5)
         np.testing.assert_allclose(ts.velocities, ref["velocities"] * cu.VEL_TO_A_PER_PS,
                                    rtol=1e-5, atol=1e-4)                # Angstrom/ps
         np.testing.assert_allclose(ts.forces, ref["forces"] * cu.FORCE_TO_KJMOL_A,
@@ -104,7 +107,9 @@ def test_read_h5md_round_trip(md_file):
         assert r.parameters == {"r0": 5.0, "material": "Cu"}
         frames = list(r)
     for b, ref in zip(frames, rec.frames):
-        np.testing.assert_array_equal(b.positions, ref["positions"])       # bit-exact
+        # unwrapped from wrapped position + image: equal to round-off
+        np.testing.assert_allclose(b.positions, ref["positions"], rtol=0, atol=1e-12 * np.abs(
+            ref["positions"]).max() + 1e-12)
         np.testing.assert_allclose(b.get_velocities(), ref["velocities"], rtol=1e-13, atol=1e-16)
         np.testing.assert_allclose(b.get_forces(), ref["forces"], rtol=1e-13, atol=1e-14)
         assert b.get_potential_energy() == pytest.approx(ref["energy"], rel=1e-13)
@@ -118,7 +123,8 @@ def test_read_h5md_round_trip(md_file):
         assert b.info["time"] == pytest.approx(ref["time"], rel=1e-13)
     last = read_h5md(path)                       # default: last frame
     assert last.info["step"] == 10
-    np.testing.assert_array_equal(read_h5md(path, frame=0).positions, rec.frames[0]["positions"])
+    np.testing.assert_allclose(read_h5md(path, frame=0).positions, rec.frames[0]["positions"],
+                               rtol=0, atol=1e-12)        # wrapped + image: equal to round-off
     with pytest.raises(InputError, match="frame"):
         read_h5md(path, frame=6)
 
@@ -201,12 +207,37 @@ def test_no_calculator_open_boundaries(tmp_path):
     assert b.positions[0, 0] == -100.0
 
 
-def test_positions_are_not_wrapped(tmp_path):
-    """Unwrapped positions (as ASE integrates them) are written as they are, no image group."""
+def test_periodic_positions_are_wrapped_with_images(tmp_path):
+    """Periodic axes: wrapped positions + integer images (H5MD); read_h5md unwraps them."""
     atoms = make_atoms()
-    atoms.positions[0] += atoms.cell[0] * 1.5   # outside the box
-    path = tmp_path / "unwrapped.h5md"
+    atoms.positions[0] += atoms.cell[0] * 1.5          # outside the box: image +1 along x
+    atoms.positions[1] -= atoms.cell[1] * 2.25         # image -3 along y
+    path = tmp_path / "wrapped.h5md"
     with H5MDWriter(path, atoms) as w:
+        w.write()
+    with h5py.File(path, "r") as f:
+        pos = f[TRAJ]["position/value"][0]
+        img = f[TRAJ]["image/value"][0]
+        L = np.diag(f[TRAJ]["box/edges/value"][0])
+    order = np.argsort(atoms.arrays["id"])
+    assert np.all(pos >= -1e-9) and np.all(pos < L + 1e-9)
+    np.testing.assert_allclose(pos + img * L, atoms.positions[order], rtol=0, atol=1e-9)
+    r0 = int(np.flatnonzero(atoms.arrays["id"][order] == atoms.arrays["id"][0])[0])
+    r1 = int(np.flatnonzero(atoms.arrays["id"][order] == atoms.arrays["id"][1])[0])
+    frac = atoms.positions / np.diag(np.asarray(atoms.cell[:]))
+    assert img[r0][0] == np.floor(frac[0, 0]) == 1
+    assert img[r1][1] == np.floor(frac[1, 1]) <= -2
+    b = read_h5md(path)
+    np.testing.assert_allclose(b.positions, atoms.positions[order], rtol=0, atol=1e-9)
+    assert "image" not in b.arrays
+
+
+def test_unwrapped_on_request(tmp_path):
+    """wrap=False writes positions exactly as ASE holds them, without images."""
+    atoms = make_atoms()
+    atoms.positions[0] += atoms.cell[0] * 1.5
+    path = tmp_path / "unwrapped.h5md"
+    with H5MDWriter(path, atoms, wrap=False) as w:
         w.write()
     b = read_h5md(path)
     row = int(np.flatnonzero(b.arrays["id"] == atoms.arrays["id"][0])[0])
