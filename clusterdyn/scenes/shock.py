@@ -19,7 +19,7 @@ from ..analysis.shock import ShockTracker
 from ..build import fcc_packing, repeat_lengths
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
-from ..errors import InputError
+from ..errors import InputError, InstabilityError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet, default_timestep
 from ..md.damped import TIMESTEP_FACTOR
@@ -47,6 +47,8 @@ PARAMS = [
     Param("h5md", True, "write an H5MD trajectory (with --out)", kind="bool"),
     Param("h5md_frames", 20, "trajectory frames written to the H5MD file", kind="int", low=1),
     Param("checkpoint_every", 10, "frames between checkpoints (with --out; 0 = none)", kind="int", low=0),
+    Param("dt_retries", 2, "times the run starts again with half the time step when the dynamics' "
+          "stiffness check stops it (0: stop with InstabilityError)", kind="int", low=0),
     Param("attraction", "all", "'initial': only pairs bonded at set-up attract, later contacts only repel "
           "(remedy for the soft response near 2 km/s, physics.md 1.5)", kind="choice",
           choices=("all", "initial")),
@@ -330,17 +332,15 @@ def shock_quantities(state, mat, u, reference=True):
     return q, ref
 
 
-@register("shock", "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot",
-          PARAMS)
-def shock_scene(v, out=None, progress=True, restart=None):
-    t0 = time.perf_counter()
+def _shock_attempt(v, dt_factor, out, progress, restart):
+    """Build (or restore) and run one shock; returns (setup, tracker, state, t_run, files, v)."""
     tracker = None
     if restart is not None:
         setup, tracker, stored = restore_shock(restart)
         v = {**v, **{k: (tuple(x) if isinstance(x, list) else x) for k, x in stored.items()}}
     else:
         setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
-                            v["noise"], v["seed"], v["dt_factor"], attraction=v.get("attraction", "all"),
+                            v["noise"], v["seed"], dt_factor, attraction=v.get("attraction", "all"),
                             inclusion=v.get("inclusion"),
                             inclusion_fraction=v.get("inclusion_fraction", 0.28),
                             inclusion_diameter=v.get("inclusion_diameter", 56 * units.um))
@@ -373,11 +373,33 @@ def shock_scene(v, out=None, progress=True, restart=None):
     finally:
         if writer is not None:
             writer.close()
+    return setup, tracker, state, t_run, files, v
+
+
+@register("shock", "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot",
+          PARAMS)
+def shock_scene(v, out=None, progress=True, restart=None):
+    t0 = time.perf_counter()
+    retried = []
+    factor = v["dt_factor"]
+    attempts = 1 if restart is not None else 1 + int(v.get("dt_retries", 0))
+    for attempt in range(attempts):
+        try:
+            setup, tracker, state, t_run, files, v = _shock_attempt(v, factor, out, progress, restart)
+            break
+        except InstabilityError as exc:
+            if exc.quantity != "timestep" or attempt == attempts - 1:
+                raise
+            retried.append(f"dt factor {factor:g}: stopped at step {exc.step} by the stiffness check "
+                           f"(closest pair {exc.particles}, timestep {exc.value:.4g} > limit {exc.limit:.4g})")
+            factor *= 0.5
     two = setup.two_phase
     q, ref = shock_quantities(state, setup.material, setup.u, reference=two is None)
     n = len(setup.atoms)
     pot = setup.calc.potentials[0]
     notes = list(state.notes)
+    for r in retried:
+        notes.append(f"time step halved after a stop: {r}")
     notes.append(f"{n} clusters, {setup.nsteps} steps of {setup.dyn.dt / (pot.r0 / pot.c0):.4f} r0/c0, "
                  f"{n * setup.nsteps / max(t_run, 1e-9):.3g} particle-steps/s, "
                  f"{setup.calc.nl.nbuilds} neighbour-list builds")
@@ -398,7 +420,8 @@ def shock_scene(v, out=None, progress=True, restart=None):
              "rho_bins_g_cm3": state.rho_bins / units.g_cm3, "rho0_g_cm3": setup.rho0 / units.g_cm3
              if setup.rho0 else setup.material.rho0 / units.g_cm3,
              "n_particles": n, "n_steps": setup.nsteps, "particle_steps": n * setup.nsteps,
-             "timestep_r0_c0": setup.dyn.dt / (pot.r0 / pot.c0),
+             "timestep_r0_c0": setup.dyn.dt / (pot.r0 / pot.c0), "dt_factor_used": factor,
+             "dt_retries_used": len(retried),
              "stepping_time_s": t_run,
              "particle_steps_per_s": n * setup.nsteps / max(t_run, 1e-9)}
     if two is not None:

@@ -199,10 +199,20 @@ def load_result(path):
     return res
 
 
+def run_key(scene, params):
+    """The parameters of a run that differ from the scene's defaults (display units, JSON-ready).
+
+    Runs are identified by these, so a parameter added to a scene later (at
+    its default) leaves earlier runs valid.
+    """
+    defaults = _jsonable(scene.display(scene.defaults()))
+    return {k: x for k, x in _jsonable(params).items() if k not in defaults or defaults[k] != x}
+
+
 def run_folder(cache, scene, overrides):
-    """``cache/<scene>-<12 hex digits>``: one folder per parameter set (hash of the parsed values)."""
-    params = _jsonable(scene.display(scene.parse(overrides)))
-    h = hashlib.sha1(json.dumps(params, sort_keys=True).encode()).hexdigest()[:12]
+    """``cache/<scene>-<12 hex digits>``: one folder per parameter set (hash of :func:`run_key`)."""
+    key = run_key(scene, scene.display(scene.parse(overrides)))
+    h = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
     return Path(cache) / f"{scene.name}-{h}"
 
 
@@ -230,7 +240,7 @@ def run_scene(scene, overrides, progress=False, desc=None, folder=None, reuse=Tr
                     d = json.loads(f.read_text())
                 except ValueError:
                     continue
-                if _jsonable(d.get("params")) == params:
+                if run_key(scene, d.get("params") or {}) == run_key(scene, params):
                     if name == "error.json":
                         return None, d["error"], d["wall_time_s"]
                     return load_result(f), None, d["wall_time_s"]
