@@ -66,6 +66,17 @@ def repeat_lengths(direction, r0):
     return np.array(out)
 
 
+def check_size(size):
+    """Validate (nx, ny, nz) repeat counts: three positive integers."""
+    try:
+        out = tuple(int(s) for s in size)
+    except (TypeError, ValueError):
+        raise InputError("size", size, "three positive integers (repeat cells along x, y, z)") from None
+    if len(out) != 3 or min(out) < 1:
+        raise InputError("size", size, "three positive integers (repeat cells along x, y, z)")
+    return out
+
+
 def fcc_sites(r0, rotation, lo, hi):
     """fcc sites (cluster centres) of lattice constant sqrt(2) r0 in the box [lo, hi).
 
@@ -152,12 +163,7 @@ def fcc_packing(material, r0, size=(4, 4, 4), direction=(1, 0, 0), pbc=False, sh
     rot = R                          # crystal -> lab: lab = R @ crystal
     lengths = repeat_lengths(key, r0)
     if shape is None:
-        try:
-            size = tuple(int(s) for s in size)
-        except (TypeError, ValueError):
-            raise InputError("size", size, "three positive integers (repeat cells along x, y, z)") from None
-        if len(size) != 3 or min(size) < 1:
-            raise InputError("size", size, "three positive integers (repeat cells along x, y, z)")
+        size = check_size(size)
         lo = np.zeros(3)
         hi = lengths * np.array(size)
         pos = fcc_sites(r0, rot, lo, hi)

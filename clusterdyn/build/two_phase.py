@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 from .. import units
 from ..errors import InputError, check_positive
 from ..materials import get_material
-from .lattice import SQRT2, fcc_sites, make_cluster_atoms, orientation_matrix, parse_direction, repeat_lengths
+from .lattice import (SQRT2, check_size, fcc_sites, make_cluster_atoms, orientation_matrix, parse_direction,
+                      repeat_lengths)
 
 #: the CD paper's two-phase samples: (matrix, inclusion, inclusion mass fraction, sphere diameter)
 PAPER_CASES = {
@@ -165,12 +166,7 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
     if not 0.0 <= diameter_spread < 0.5:
         raise InputError("diameter_spread", diameter_spread, "a relative spread in [0, 0.5)")
     key = parse_direction(direction)
-    try:
-        size = tuple(int(s) for s in size)
-    except (TypeError, ValueError):
-        raise InputError("size", size, "three positive integers (repeat cells along x, y, z)") from None
-    if len(size) != 3 or min(size) < 1:
-        raise InputError("size", size, "three positive integers (repeat cells along x, y, z)")
+    size = check_size(size)
     R = orientation_matrix(key)
     L = repeat_lengths(key, r0) * np.array(size)
     V = float(np.prod(L))

@@ -12,6 +12,18 @@ from numba import njit
 
 
 @njit(cache=True)
+def unlink(p, linked_p, broken_p, sig_p2, tau_p2c):
+    """Switch pair p from linked to unlinked: mark it broken and drop its pair forces."""
+    linked_p[p] = 0
+    broken_p[p] = 1
+    sig_p2[p, 0] = 0.0
+    sig_p2[p, 1] = 0.0
+    for s in range(2):
+        for a in range(3):
+            tau_p2c[p, s, a] = 0.0
+
+
+@njit(cache=True)
 def drucker_prager(s_ncc, i, j, beta):
     """Equivalent stress of the mean tensor of automata i and j."""
     m = 0.0
@@ -39,12 +51,6 @@ def fracture(i_p, j_p, linked_p, s_ncc, sigc_p, beta_p, sig_p2, tau_p2c, broken_
         if linked_p[p] == 0 or sigc_p[p] <= 0.0:
             continue
         if drucker_prager(s_ncc, i_p[p], j_p[p], beta_p[p]) >= sigc_p[p]:
-            linked_p[p] = 0
-            broken_p[p] = 1
-            sig_p2[p, 0] = 0.0
-            sig_p2[p, 1] = 0.0
-            for s in range(2):
-                for a in range(3):
-                    tau_p2c[p, s, a] = 0.0
+            unlink(p, linked_p, broken_p, sig_p2, tau_p2c)
             n += 1
     return n

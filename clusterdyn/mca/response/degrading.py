@@ -11,7 +11,7 @@ the peak finite, default 0.8.)
 
 from numba import njit
 
-from .brittle import drucker_prager
+from .brittle import drucker_prager, unlink
 
 
 @njit(cache=True)
@@ -24,13 +24,7 @@ def degrade(i_p, j_p, linked_p, s_ncc, sigd_p, sigc_p, beta_p, Dc_p, D_p, sig_p2
             continue
         seq = drucker_prager(s_ncc, i_p[p], j_p[p], beta_p[p])
         if seq >= sigc_p[p]:
-            linked_p[p] = 0
-            broken_p[p] = 1
-            sig_p2[p, 0] = 0.0
-            sig_p2[p, 1] = 0.0
-            for s in range(2):
-                for a in range(3):
-                    tau_p2c[p, s, a] = 0.0
+            unlink(p, linked_p, broken_p, sig_p2, tau_p2c)
             n += 1
             continue
         # the Drucker-Prager scale of sigma_d: sigma_d is given in the same measure

@@ -9,6 +9,8 @@ so the stress-strain curve softens after the plateau.
 
 from numba import njit
 
+from .brittle import unlink
+
 
 @njit(cache=True)
 def degrade_plastic(i_p, j_p, linked_p, epsp_n, epsd_p, epsf_p, D_p, sig_p2, tau_p2c, broken_p):
@@ -22,13 +24,7 @@ def degrade_plastic(i_p, j_p, linked_p, epsp_n, epsd_p, epsf_p, D_p, sig_p2, tau
             continue
         d = (e - epsd_p[p]) / (epsf_p[p] - epsd_p[p])
         if d >= 1.0:
-            linked_p[p] = 0
-            broken_p[p] = 1
-            sig_p2[p, 0] = 0.0
-            sig_p2[p, 1] = 0.0
-            for s in range(2):
-                for a in range(3):
-                    tau_p2c[p, s, a] = 0.0
+            unlink(p, linked_p, broken_p, sig_p2, tau_p2c)
             n += 1
         elif d > D_p[p]:
             D_p[p] = d
