@@ -69,6 +69,7 @@ class SizeParam(Param):
 #: longitudinal sound speed of the nearest-neighbour fcc lattice along the shock direction, in c0
 #: (physics.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
 LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
+LATTICE_MODULUS = {"100": "C11 = 3/2", "110": "15/8", "111": "2"}
 
 PARAMS = [
     Param("material", "Al", "material (the matrix of a two-phase sample)", kind="choice",
@@ -360,7 +361,8 @@ def _low_u(rows, mat, sv, two):
                 lines.append(f"the lattice is stiffer than the real metal at low u: D0 is {D0 / ref.c0_km_s - 1:+.1%} "
                              f"above the experimental Hugoniot's intercept ({ref.name}: {ref.c0_km_s:g} km/s) and "
                              f"{D0 / c0 - 1:+.1%} above the bulk sound speed c0 (a nearest-neighbour central-force "
-                             "lattice has C11 = 3/2 K along [100], physics.md 1.5)")
+                             f"lattice has rho c_L^2 = {LATTICE_MODULUS[sv['direction']]} K along "
+                             f"[{sv['direction']}], physics.md 1.5)")
             except InputError:
                 lines.append(f"the lattice is stiffer than the material at low u: D0 is {D0 / c0 - 1:+.1%} above "
                              "the bulk sound speed c0")
