@@ -74,6 +74,8 @@ PARAMS = [
               low_open=True, optional=True),
     Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",
           kind="str", optional=True),
+    Param("reuse", True, "read back runs of the same parameters found in the cache (false after a change "
+          "of the model code)", kind="bool"),
     Param("plots", True, "write the PNG figure", kind="bool"),
 ]
 
@@ -144,7 +146,8 @@ def convergence_study(overrides=None, out=None, progress=True, quiet=None):
                    "noise": s["noise"], "r0": s["r0"]})
         if bar is not None:
             bar.set_postfix_str(f"{sweep} {label}")
-        res, err, wall = run_scene(scene, ov, progress=progress, cache=v["cache"] or folder / "runs")
+        res, err, wall = run_scene(scene, ov, progress=progress, cache=v["cache"] or folder / "runs",
+                                   reuse=v["reuse"])
         done[key(s)] = shock_row(res, err, wall)
         if bar is not None:
             bar.update(1)

@@ -91,6 +91,8 @@ PARAMS = [
     SizeParam("phase_size", None, "sample of the pure-phase runs of a two-phase study (default: the sample's)"),
     Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",
           kind="str", optional=True),
+    Param("reuse", True, "read back runs of the same parameters found in the cache (false after a change "
+          "of the model code)", kind="bool"),
     Param("uniaxial", True, "static uniaxial-compression check of the longitudinal stress", kind="bool"),
     Param("plots", True, "write the PNG figures", kind="bool"),
 ]
@@ -218,7 +220,7 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     for n, (group, ov) in enumerate(plan):
         if bar is not None:
             bar.set_postfix_str(f"{group} u={ov['u']}")
-        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache)
+        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
         row = shock_row(res, err, wall)
         pv = scene.display(scene.parse(ov))
         row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),

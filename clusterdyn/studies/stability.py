@@ -18,7 +18,8 @@ stable step is an oscillating offset, bounded means not growing: the second
 half of the run within twice the first, and below the kinetic energy); the
 largest step with ``epsilon < accuracy_tol`` (1%) is listed beside it.  The limit is found by
 stepping the time step up by sqrt(2) from the default until it fails (down
-by 2 if the default fails), then bisecting.  The table lists, in units of r0/c0: the default time step, the measured limit, their ratio (the margin), the
+by 2 if the default fails), then bisecting.  The table lists, in units of
+r0/c0: the default time step, the measured limit, their ratio (the margin), the
 energy error at the default step, the closest approach seen (r/r0), the
 limit the dynamics' own stiffness check predicts at that approach
 (:func:`clusterdyn.md.stability_limit`), and what stopped the first failing
@@ -46,7 +47,8 @@ from ..md.damped import TIMESTEP_FACTOR
 from ..scenes.base import Param
 from ..scenes.common import thermal_noise
 from ..scenes.shock import CD_MATERIALS, build_shock, shock_timestep
-from .common import ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, write_csv, write_json
+from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, write_csv,
+                     write_json)
 
 PARAMS = [
     Param("material", "Al", "material", kind="choice", choices=CD_MATERIALS),
