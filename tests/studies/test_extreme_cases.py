@@ -15,6 +15,7 @@ from clusterdyn.build import fcc_packing, make_cluster_atoms
 from clusterdyn.calculators import ClusterDynamics, mark_initial_bonds
 from clusterdyn.errors import InputError, InstabilityError
 from clusterdyn.md import DampedVerlet, default_timestep, stability_limit
+from clusterdyn.potentials import R_MIN_FACTOR
 from clusterdyn.scenes.common import thermal_noise
 from clusterdyn.scenes.shock import build_shock, run_shock
 from clusterdyn.studies.stability import EnergyBalance
@@ -58,16 +59,34 @@ def test_8kms_piston_in_b4c_runs_with_energy_balance():
     assert bal.min_r < 0.7                                  # deep in the compressed branch
 
 
-def test_8kms_piston_in_aluminium_stops_beyond_the_table():
-    # the soft Tait tail of the aluminium table (n1 = 2) lets the piston's first impact push a
-    # pair below 0.45 r0, the potential's smallest tabulated distance: the run must stop, not clip
+def test_8kms_piston_in_aluminium():
+    # the soft Tait tail of the aluminium table (n1 = 2) lets the piston's first impact push a pair
+    # to about 0.39 r0: below a table ending at 0.45 r0 the run must stop, not clip; with a table
+    # reaching further it runs with its energy balance
     s = build_shock("Al", 8 * units.km_s, size=(16, 3, 3))
+    bal = EnergyBalance(s.dyn, s.atoms, [s.piston])
+    s.dyn.attach(bal, interval=1)
+    try:
+        _, st, _ = run_shock(s, frames=20, progress=False)
+    except InstabilityError as err:
+        assert R_MIN_FACTOR > 0.39
+        assert err.quantity == "distance r/r0" and err.value < err.limit
+        assert err.limit == pytest.approx(R_MIN_FACTOR, rel=0.01)
+        assert err.step > 0 and len(err.particles) == 2
+        assert "step" in str(err) and "particles" in str(err)
+    else:
+        assert math.isfinite(st.D_fit) and np.max(np.abs(bal.errors)) < 2e-3 * bal.W
+        assert bal.min_r > R_MIN_FACTOR
+
+
+def test_piston_far_beyond_the_table_stops_naming_step_particles_quantity():
+    s = build_shock("Al", 25 * units.km_s, size=(16, 3, 3))
     with pytest.raises(InstabilityError) as e:
         run_shock(s, frames=10, progress=False)
     err = e.value
-    assert err.quantity == "distance r/r0" and err.value < err.limit
-    assert err.step > 0 and len(err.particles) == 2
-    assert "step" in str(err) and "particles" in str(err)
+    assert err.quantity in ("distance r/r0", "timestep", "displacement per step / r0")
+    assert err.step is not None and len(err.particles) >= 1
+    assert "step" in str(err) and "particle" in str(err)
 
 
 # ---------------------------------------------------------------- compression beyond delta = 2.5
@@ -89,12 +108,13 @@ def test_compression_beyond_2p5():
 
 
 def test_pair_closer_than_the_table_names_step_particles_quantity():
-    a = make_cluster_atoms(np.array([[0, 0, 0], [0.44 * R0, 0, 0]]), ["Al"], [R0])
+    r = 0.95 * R_MIN_FACTOR
+    a = make_cluster_atoms(np.array([[0, 0, 0], [r * R0, 0, 0]]), ["Al"], [R0])
     a.calc = ClusterDynamics()
     with pytest.raises(InstabilityError) as e:
         a.get_forces()
     assert set(e.value.particles) == {0, 1} and e.value.quantity == "distance r/r0"
-    assert e.value.value == pytest.approx(0.44)
+    assert e.value.value == pytest.approx(r)
 
 
 # ---------------------------------------------------------------- time step at 0.9x and 1.5x the limit
