@@ -1,8 +1,8 @@
 """Dynamics (ASE MolecularDynamics subclasses) and boundary conditions."""
 
 from .boundaries import Piston, RigidWall
-from .damped import DampedVerlet, default_timestep, stability_limit
+from .damped import DampedVerlet, default_timestep, pair_stability_limit, stability_limit
 
-__all__ = ["DampedVerlet", "Piston", "RigidWall", "default_timestep", "stability_limit"]
+__all__ = ["DampedVerlet", "Piston", "RigidWall", "default_timestep", "pair_stability_limit", "stability_limit"]
 from ..mca.dynamics import MCADynamics  # noqa: E402,F401
 __all__ += ["MCADynamics"]

@@ -45,6 +45,22 @@ def stability_limit(calc, r_over_r0=1.0):
     return lim
 
 
+def pair_stability_limit(calc, a, b, r):
+    """Stability limit ``2/omega_max`` of a lattice whose bonds are as stiff as the
+    (a, b) pair law at distance r (``omega_max^2 = 8 k/m`` with the lighter
+    cluster's mass); unlike pairs use their series law."""
+    law = calc.law(a, b)
+    if a == b:
+        k = float(law.stiffness(r))
+    else:
+        h = 1e-4 * law.r0
+        k = float(-(law.force(r + h) - law.force(r - h)) / (2.0 * h))
+    if not k > 0:
+        return math.inf
+    m = min(calc.masses_t[a], calc.masses_t[b])
+    return 2.0 / math.sqrt(8.0 * k / m)
+
+
 def default_timestep(calc, u_max=0.0, factor=TIMESTEP_FACTOR):
     """``factor * min(r0 / (c0 + u_max))`` over the materials (ASE time).
 
@@ -170,11 +186,16 @@ class DampedVerlet(MolecularDynamics):
         return forces
 
     def _check_stiffness(self):
+        """The time step against the limit set by the closest pair's own bond stiffness."""
         st = self.calc.last_stats
         x = st["min_r_over_r0"]
         if x >= 1.0 or not math.isfinite(x):
             return
-        lim = stability_limit(self.calc, x)
+        i, j = st["closest"]
+        mid = self.atoms.arrays.get("material")
+        a, b = (0, 0) if mid is None else (int(mid[i]), int(mid[j]))
+        r = x * self.calc.law(a, b).r0
+        lim = pair_stability_limit(self.calc, a, b, r)
         if self.dt > lim:
             raise InstabilityError(
                 "time step above the stability limit at the current compression "

@@ -135,3 +135,21 @@ def test_close_approach_during_run_is_an_instability():
     msg = str(exc.value)
     assert "step" in msg and (f"particles {min(i, j)}, {max(i, j)}" in msg or "particle" in msg)
     assert exc.value.step is not None and exc.value.step > 0
+
+
+def test_stiffness_check_uses_the_closest_pairs_own_law():
+    """A compressed soft pair is judged by its own stiffness, not the stiffest material's."""
+    from clusterdyn.md import pair_stability_limit
+    base = fcc_packing("Al", R0, size=(2, 2, 2), pbc=True)
+    atoms = make_cluster_atoms(base.positions, ["Pb", "h-BN"], [R0, R0],
+                               material_id=np.arange(len(base)) % 2, cell=base.cell, pbc=True)
+    atoms.calc = ClusterDynamics()
+    atoms.calc.setup(atoms)
+    c = atoms.calc
+    r = 0.7 * R0
+    lim_pb, lim_bn = pair_stability_limit(c, 0, 0, r), pair_stability_limit(c, 1, 1, r)
+    lim_mix = pair_stability_limit(c, 0, 1, r)
+    assert lim_bn < lim_pb                       # h-BN (n = 10.4) stiffens far more than Pb (n = 3)
+    assert lim_bn < lim_mix < lim_pb             # two halves in series: in between
+    assert pair_stability_limit(c, 0, 0, R0) == pytest.approx(
+        2 / np.sqrt(8 * c.potentials[0].stiffness() / c.potentials[0].mass))
