@@ -10,7 +10,7 @@ from ase.stress import full_3x3_to_voigt_6_stress  # noqa: F401  (convention ref
 from ..errors import InputError, InstabilityError
 from ..materials import get_material
 from ..neighbors import NeighborList
-from ..potentials import DEFAULT_RC, ClusterPotential, MixedPairPotential, build_tables, check_rc
+from ..potentials import DEFAULT_RC, N_BINS, ClusterPotential, MixedPairPotential, build_tables, check_rc
 from ..neighbors.celllist import gather_velocities
 from . import _cd_kernels as K
 
@@ -85,8 +85,8 @@ class ClusterDynamics(Calculator):
         Cluster size of each id, Angstrom.
     skin : float, optional
         Verlet skin as a multiple of the smallest r0 (default: :func:`default_skin`).
-    n_table : int, default 2000
-        Bins of the cubic-Hermite pair tables.
+    n_table : int, default :data:`clusterdyn.potentials.N_BINS` (2500)
+        Bins of the cubic-Hermite pair tables over [R_MIN_FACTOR r0, rc r0].
     attraction : "all" or "initial"
         ``"initial"``: attraction only between pairs bonded at set-up
         (``atoms.arrays['bonds0']``, see :func:`mark_initial_bonds`); pairs that
@@ -98,7 +98,7 @@ class ClusterDynamics(Calculator):
     implemented_properties = ["energy", "free_energy", "energies", "forces", "stress", "stresses",
                               "virials"]
     default_parameters = {"rc": DEFAULT_RC, "materials": None, "r0": None, "skin": None,
-                          "n_table": 2000, "attraction": "all"}
+                          "n_table": N_BINS, "attraction": "all"}
     nolabel = True
 
     def __init__(self, **kwargs):

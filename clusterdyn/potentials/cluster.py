@@ -22,8 +22,12 @@ from ..errors import InputError, check_positive
 from ..materials import get_material
 
 SQRT2 = math.sqrt(2.0)
-#: smallest tabulated distance, as a fraction of r0 (closer is an instability)
-R_MIN_FACTOR = 0.45
+#: smallest tabulated distance, as a fraction of r0 (closer is an instability).  Hot shocked
+#: lattices push pairs well inside the densest cold-curve row (0.75 r0 for aluminium): at
+#: 6 km/s thermal collisions reach 0.4 r0, so the table runs down to compression delta = 37.
+R_MIN_FACTOR = 0.3
+#: bins of a pair table over [R_MIN_FACTOR r0, rc r0] (bin width 3.4e-4 r0 at rc = 1.15)
+N_BINS = 2500
 #: default cutoff, as a multiple of r0
 DEFAULT_RC = 1.15
 
@@ -59,7 +63,7 @@ class ClusterPotential:
     cutoff : float
         ``rc * r0``, Angstrom.
     r_min : float
-        Smallest tabulated distance ``0.45 r0``.
+        Smallest tabulated distance ``R_MIN_FACTOR r0`` (0.3 r0).
     """
 
     def __init__(self, material, r0, rc=DEFAULT_RC):
@@ -163,7 +167,7 @@ class PairTable:
     kernel's force is exactly ``-dE/dr`` of that cubic.
     """
 
-    def __init__(self, law, n_bins=2000):
+    def __init__(self, law, n_bins=N_BINS):
         self.law = law
         self.cutoff = law.cutoff
         self.n_bins = int(n_bins)
@@ -201,7 +205,7 @@ class PairTable:
         return e, -de / self.h
 
 
-def build_tables(potentials, n_bins=2000):
+def build_tables(potentials, n_bins=N_BINS):
     """Tables for every pair of materials.
 
     Parameters

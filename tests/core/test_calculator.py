@@ -117,7 +117,7 @@ def test_errors():
     with pytest.raises(InputError, match="orthorhombic"):
         b.get_forces()
     c = atoms.copy()
-    c.positions[1] = c.positions[0] + [0.3 * R0, 0, 0]
+    c.positions[1] = c.positions[0] + [0.2 * R0, 0, 0]
     c.calc = ClusterDynamics()
-    with pytest.raises(InstabilityError, match=r"particles 0, 1.*distance r/r0 = 0.3"):
+    with pytest.raises(InstabilityError, match=r"particles 0, 1.*distance r/r0 = 0.2"):
         c.get_forces()
