@@ -168,7 +168,12 @@ class ShockState:
         Von Mises intensity (CD eq. 4) of the region's mean stress.
     D_mass, D_mass_spread : float
         D from mass conservation ``rho0 D = rho (D - u)``, i.e.
-        ``D = u / (1 - dx/dX)``.
+        ``D = u / (1 - dx/dX)``.  ``dx/dX`` is the least-squares slope of
+        current against initial positions over the region, which is the mean
+        local compression weighted by ``(X - Xa)(Xb - X)``; ``u`` here is the
+        particle velocity averaged with the same weights, so that a steady wave
+        of any profile (a ramped weak shock included) gives ``D_mass = D``
+        exactly (``1 - dx/dX = u/D`` holds at every point of it).
     P_momentum : float
         ``rho0 D_fit u`` (momentum conservation), to compare with P.
     steady : bool
@@ -317,6 +322,11 @@ class ShockTracker:
         M = m.sum()
         vbar = (m[:, None] * v).sum(axis=0) / M
         slope = np.polyfit(X0, x[sel], 1)[0]
+        # the least-squares slope is the mean local compression dx/dX with weights
+        # (X - Xa)(Xb - X) per particle; mass conservation pairs it with the velocity
+        # averaged with the same weights (see ShockState.D_mass)
+        wq = (X0 - X0.min()) * (X0.max() - X0)
+        u_fit = float((wq * v[:, ax]).sum() / wq.sum())
         V = slope * self.rest_volume[sel].sum()
         # kinetic part about each slab's mean velocity (as in the profile)
         edges = prof["edges"]
@@ -326,7 +336,7 @@ class ShockTracker:
         W = np.array([-(m * dv[:, p] * dv[:, q]).sum() for p, q in pairs])
         if virials is not None:
             W = W + np.asarray(virials)[sel].sum(axis=0)
-        return {"n_region": int(sel.sum()), "u_region": float(vbar[ax]), "slope": float(slope),
+        return {"n_region": int(sel.sum()), "u_region": float(vbar[ax]), "u_fit": u_fit, "slope": float(slope),
                 "rho_region": float(M / V), "stress_region": W / V}
 
     def result(self, x_min_frac=0.2, x_max_frac=0.85):
@@ -374,11 +384,14 @@ class ShockTracker:
             st = np.array([f["stress_region"] for f in frames])
             Ps = -st[:, ax]
             sus = von_mises(st)
+            # frames recorded before the fit weights existed carry only u_region
+            ufs = np.array([f.get("u_fit", f["u_region"]) for f in frames])
             with np.errstate(divide="ignore", invalid="ignore"):
-                Dm = us / (1.0 - slopes)
+                Dm = ufs / (1.0 - slopes)
         u = float(np.mean(us))
         s_mean = float(np.mean(slopes))
-        D_mass = u / (1.0 - s_mean) if s_mean < 1.0 else np.nan
+        u_fit = float(np.mean(ufs)) if frames else np.nan
+        D_mass = u_fit / (1.0 - s_mean) if s_mean < 1.0 else np.nan
         reasons = []
         if not np.isfinite(D):
             reasons.append("no front fit")

@@ -346,13 +346,14 @@ def _shock_attempt(v, dt_factor, out, progress, restart):
                             inclusion_diameter=v.get("inclusion_diameter", 56 * units.um))
     writer = None
     files = []
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)       # checkpoints go there even without H5MD
     if out is not None and v["h5md"]:
         try:
             from ..io import H5MDWriter
         except ImportError:
             H5MDWriter = None
         if H5MDWriter is not None:
-            out.mkdir(parents=True, exist_ok=True)
             path = out / "shock.h5md"
             # the reaction of the sample on the piston (x component), and the pressure it implies
             area = setup.atoms.cell[1, 1] * setup.atoms.cell[2, 2]

@@ -63,6 +63,13 @@ def test_config_file(tmp_path):
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["params"]["u"]["value"] == pytest.approx(2.0) and d["params"]["size"] == [30, 3, 3]
+    # the same scene without H5MD into a folder that does not exist yet: the folder is made
+    # for the result and the checkpoints
+    out = tmp_path / "new" / "folder"
+    r = run(["run", "shock", "--config", str(cfg), "--out", str(out), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "result.json").exists() and (out / "checkpoint.h5").exists()
+    assert not (out / "shock.h5md").exists()
 
 
 def test_h5md_of_a_shock_opens_in_mdanalysis(tmp_path):
