@@ -107,3 +107,16 @@ def test_cli_study_json(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "clusterdyn.cli", "study", "hugoniot", "--set", "colour=red"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "colour" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_conservation_verdict_names_steady_runs_off_the_checks():
+    from clusterdyn.studies.hugoniot import _conservation_verdict
+    rows = [{"u_piston": 3.0, "steady": True, "mass_check": -0.044, "momentum_check": 0.059},
+            {"u_piston": 1.0, "steady": True, "mass_check": 0.001, "momentum_check": 0.0},
+            {"u_piston": 2.0, "steady": False, "mass_check": 0.1, "momentum_check": 0.1}]
+    text = _conservation_verdict(rows)
+    assert "steady runs: 2 of 3 (unsteady: u = 2 km/s)" in text
+    assert "within 2%: 1/2" in text and "within 5%: 1/2" in text
+    assert "off the conservation checks: u = 3 km/s (mass -4.4%, momentum +5.9%)" in text
+    assert "u = 1 km/s" not in text.split("off the conservation checks")[1]
+    assert "off the conservation" not in _conservation_verdict(rows[1:])
