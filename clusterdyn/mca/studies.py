@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import units
+from ..analysis.stress import VOIGT
 from .builders import mca_packing
 from .calculator import MCA
 from .dynamics import Grip, MCADynamics
@@ -180,14 +181,12 @@ def elasticity_table(nus=NUS, packings=PACKINGS, size=5.0, out=None, stream=sys.
 
 # -- Cluster Dynamics contrast: the same test on a pair-potential fcc packing ------------------
 
-#: Voigt order (xx, yy, zz, yz, xz, xy), as ASE
-_VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 
 
 def _voigt_to_tensor(C6):
     C = np.zeros((3, 3, 3, 3))
-    for I, (i, j) in enumerate(_VOIGT):
-        for J, (k, m) in enumerate(_VOIGT):
+    for I, (i, j) in enumerate(VOIGT):
+        for J, (k, m) in enumerate(VOIGT):
             for a, b in ((i, j), (j, i)):
                 for c, e in ((k, m), (m, k)):
                     C[a, b, c, e] = C6[I, J]
@@ -197,7 +196,7 @@ def _voigt_to_tensor(C6):
 def rotate_stiffness(C6, M):
     """Stiffness (6, 6) Voigt, engineering shear strains, in the frame where ``v' = M v``."""
     C = np.einsum("ia,jb,kc,ld,abcd->ijkl", M, M, M, M, _voigt_to_tensor(np.asarray(C6, float)))
-    return np.array([[C[i, j, k, m] for (k, m) in _VOIGT] for (i, j) in _VOIGT])
+    return np.array([[C[i, j, k, m] for (k, m) in VOIGT] for (i, j) in VOIGT])
 
 
 def cubic_stiffness(C11, C12, C44):
@@ -285,7 +284,7 @@ def cd_elastic_constants(material="Al", r0=5 * units.um, direction=(1, 0, 0), st
 
     omega = r0 ** 3 / math.sqrt(2.0)
     for J in range(3, 6):
-        b, a = _VOIGT[J]                    # u_a = gamma x_b, open along b
+        b, a = VOIGT[J]                    # u_a = gamma x_b, open along b
         pbc = [True, True, True]
         pbc[b] = False
         slab = _cd_sample(mat, r0, key, pbc)
@@ -365,7 +364,7 @@ def cd_contrast_table(material="Al", r0=5 * units.um, directions=((1, 0, 0), (1,
 
 # -- degrading response: load / unload / reload ---------------------------------------------
 
-def _cycle(s):
+def load_unload_reload(s):
     """Load fraction s in [0, 1] -> strain / strain_max: load, unload to zero strain, reload."""
     if s < 0.4:
         return s / 0.4
@@ -382,7 +381,7 @@ def degrading_cycle(material="concrete", size=(16, 5, 5), steps=6000, peak=0.95,
                     out=None, stream=sys.stdout):
     """Load / unload / reload cycle of a degrading material (bar in tension, fcc, d = 1 A).
 
-    The grips follow :func:`_cycle` to ``strain_max = peak sigma_t / E`` (load over
+    The grips follow :func:`load_unload_reload` to ``strain_max = peak sigma_t / E`` (load over
     the first 40% of the steps, unload to zero strain over 20%, reload over 40%).
     Slopes are fitted on the windows :data:`FIT_WINDOWS`; ``D_mean`` is the mean
     damage of the linked pairs in the middle half of the bar at the end.
@@ -400,7 +399,7 @@ def degrading_cycle(material="concrete", size=(16, 5, 5), steps=6000, peak=0.95,
     mat = get_material(material)
     em = peak * mat.sigma_t / mat.E
     t0 = time.perf_counter()
-    r = uniaxial(mat, "tension", size=size, strain_max=em, steps=steps, path=_cycle, damping=damping)
+    r = uniaxial(mat, "tension", size=size, strain_max=em, steps=steps, path=load_unload_reload, damping=damping)
     e, sg = r["strain"], r["stress"]
     s = r["time"] / (steps * r["dyn"].dt)
     fits = {}

@@ -5,6 +5,7 @@ import numpy as np
 from clusterdyn.materials import get_material
 from clusterdyn.mca.builders import precrack
 from clusterdyn.mca.experiments import uniaxial
+from clusterdyn.mca.studies import load_unload_reload
 
 
 def test_elastic_plastic_plateau_and_residual_strain():
@@ -40,14 +41,8 @@ def test_degrading_unloading_modulus(tmp_path):
     co = get_material("concrete")
     em = 0.95 * co.sigma_t / co.E
 
-    def path(s):                       # load, unload to zero, reload
-        if s < 0.4:
-            return s / 0.4
-        if s < 0.6:
-            return 1 - (s - 0.4) / 0.2
-        return (s - 0.6) / 0.4
-
-    r = uniaxial(co, "tension", size=(10, 4, 4), strain_max=em, steps=2500, path=path, damping=0.1)
+    r = uniaxial(co, "tension", size=(10, 4, 4), strain_max=em, steps=2500, path=load_unload_reload,
+                 damping=0.1)
     e, s = r["strain"], r["stress"]
     n = len(e)
     E0 = np.polyfit(e[int(.1 * n):int(.25 * n)], s[int(.1 * n):int(.25 * n)], 1)[0]
