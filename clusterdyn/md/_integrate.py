@@ -1,41 +1,69 @@
 """numba kernels of the velocity-Verlet sub-steps (kick, drift) with a speed monitor.
 
-They stream through memory at a few ns per particle and run on one thread:
-every parallel region is a fork and a join of all threads, and on a loaded
-machine a join that waits for a descheduled thread costs milliseconds.  The
-dynamics keeps its parallel regions to the force loop and its reduction.
+They stream through memory at about a nanosecond per particle, so on more
+than one thread they are a visible share of a step (Amdahl): they run in
+parallel over fixed blocks of :data:`BLOCK` particles.  Every result is the
+same on any thread count: kicks and drifts are per particle, and the largest
+speed is a maximum over blocks taken in block order.  Over fewer particles
+than ``clusterdyn.parallel.MIN_PARTICLES_PER_THREAD`` the dynamics runs them
+on one thread (no fork and join).
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+#: particles per block of the streaming passes
+BLOCK = 8192
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def kick(p_nc, f_nc, h):
     """p += h * f (h = dt/2)."""
     n = p_nc.shape[0]
-    for i in range(n):
-        p_nc[i, 0] += h * f_nc[i, 0]
-        p_nc[i, 1] += h * f_nc[i, 1]
-        p_nc[i, 2] += h * f_nc[i, 2]
+    nb = (n + BLOCK - 1) // BLOCK
+    for b in prange(nb):
+        for i in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            p_nc[i, 0] += h * f_nc[i, 0]
+            p_nc[i, 1] += h * f_nc[i, 1]
+            p_nc[i, 2] += h * f_nc[i, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def drift(x_nc, p_nc, invm_n, dt, v2_n):
     """x += dt * p/m; returns (max v^2, its particle). NaN/inf speeds come back as max."""
     n = x_nc.shape[0]
-    for i in range(n):
-        vx = p_nc[i, 0] * invm_n[i]
-        vy = p_nc[i, 1] * invm_n[i]
-        vz = p_nc[i, 2] * invm_n[i]
-        x_nc[i, 0] += dt * vx
-        x_nc[i, 1] += dt * vy
-        x_nc[i, 2] += dt * vz
-        v2_n[i] = vx * vx + vy * vy + vz * vz
     if n == 0:
         return 0.0, -1
-    k = np.argmax(v2_n)
-    return v2_n[k], k
+    nb = (n + BLOCK - 1) // BLOCK
+    bmax = np.empty(nb)
+    barg = np.empty(nb, np.int64)
+    for b in prange(nb):
+        m = -1.0
+        k = b * BLOCK
+        for i in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            vx = p_nc[i, 0] * invm_n[i]
+            vy = p_nc[i, 1] * invm_n[i]
+            vz = p_nc[i, 2] * invm_n[i]
+            x_nc[i, 0] += dt * vx
+            x_nc[i, 1] += dt * vy
+            x_nc[i, 2] += dt * vz
+            v2 = vx * vx + vy * vy + vz * vz
+            v2_n[i] = v2
+            if not v2 <= m:  # also takes NaN
+                if not (m != m):
+                    m = v2
+                    k = i
+        bmax[b] = m
+        barg[b] = k
+    m = bmax[0]
+    k = barg[0]
+    for b in range(1, nb):
+        if m != m:
+            break
+        if not bmax[b] <= m:
+            m = bmax[b]
+            k = barg[b]
+    return m, k
 
 
 @njit(cache=True)
@@ -44,3 +72,26 @@ def kinetic(p_nc, invm_n):
     for i in range(p_nc.shape[0]):
         e += 0.5 * (p_nc[i, 0] ** 2 + p_nc[i, 1] ** 2 + p_nc[i, 2] ** 2) * invm_n[i]
     return e
+
+
+@njit(cache=True)
+def set_momenta(p_nc, m_n, idx, v_c):
+    """p[i] = m[i] * v for i in idx (a piston's layer)."""
+    for q in range(idx.shape[0]):
+        i = idx[q]
+        p_nc[i, 0] = m_n[i] * v_c[0]
+        p_nc[i, 1] = m_n[i] * v_c[1]
+        p_nc[i, 2] = m_n[i] * v_c[2]
+
+
+@njit(cache=True)
+def take_forces(f_nc, idx, out_c):
+    """out = sum of f[i] over idx, then f[i] = 0 (a piston's reaction)."""
+    out_c[0] = 0.0
+    out_c[1] = 0.0
+    out_c[2] = 0.0
+    for q in range(idx.shape[0]):
+        i = idx[q]
+        for d in range(3):
+            out_c[d] += f_nc[i, d]
+            f_nc[i, d] = 0.0

@@ -8,6 +8,16 @@ knows, so boundary conditions are recorded in H5MD metadata and checkpoints.
 import numpy as np
 
 from ..errors import InputError
+from ._integrate import set_momenta, take_forces
+
+
+def _masses(atoms):
+    m = atoms.arrays.get("masses")
+    return m if m is not None else atoms.get_masses()
+
+
+def _f64(a):
+    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 2 and a.shape[1] == 3
 
 
 class Piston:
@@ -44,12 +54,20 @@ class Piston:
         pass
 
     def adjust_momenta(self, atoms, momenta):
-        m = atoms.get_masses()[self.index]
-        momenta[self.index] = m[:, None] * self.velocity[None, :]
+        m = _masses(atoms)
+        if _f64(momenta) and m.dtype == np.float64:
+            set_momenta(momenta, m, self.index, self.velocity)
+        else:
+            momenta[self.index] = m[self.index, None] * self.velocity[None, :]
 
     def adjust_forces(self, atoms, forces):
-        self.force = forces[self.index].sum(axis=0).copy()
-        forces[self.index] = 0.0
+        if _f64(forces):
+            f = np.empty(3)
+            take_forces(forces, self.index, f)
+            self.force = f
+        else:
+            self.force = forces[self.index].sum(axis=0).copy()
+            forces[self.index] = 0.0
 
     def get_removed_dof(self, atoms):
         return 3 * len(self.index)

@@ -33,6 +33,8 @@ from numba import njit, prange
 from ..errors import InputError
 from ..parallel import use_threads
 
+#: blocks of the displacement check (fixed: the result does not depend on the thread count)
+DISP_BLOCKS = 16
 #: most cells per particle before the grid is coarsened (dilute, exploding samples)
 MAX_CELLS_PER_PARTICLE = 4
 
@@ -312,29 +314,36 @@ def _compact(nbr_nk, img_nk, cnt_n, first_n, j_p, img_p):
             img_p[p + q] = img_nk[i, q]
 
 
-@njit(cache=True)
+#: rows per block of the streaming passes (gathers, displacement check)
+BLOCK = 8192
+
+
+@njit(cache=True, parallel=True)
 def gather_positions(pos_nc, perm, offs_nc, xs_nc):
-    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels (one thread:
-    a streaming pass is not worth a parallel region, see clusterdyn.md._integrate)."""
-    for k in range(perm.shape[0]):
-        i = perm[k]
-        xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
-        xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
-        xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
+    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels."""
+    n = perm.shape[0]
+    for b in prange((n + BLOCK - 1) // BLOCK):
+        for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            i = perm[k]
+            xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
+            xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
+            xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def gather_velocities(p_nc, invm_n, perm, vs_nc):
-    """vs[k] = p[perm[k]] / m[perm[k]] (one thread)."""
-    for k in range(perm.shape[0]):
-        i = perm[k]
-        w = invm_n[i]
-        vs_nc[k, 0] = p_nc[i, 0] * w
-        vs_nc[k, 1] = p_nc[i, 1] * w
-        vs_nc[k, 2] = p_nc[i, 2] * w
+    """vs[k] = p[perm[k]] / m[perm[k]]."""
+    n = perm.shape[0]
+    for b in prange((n + BLOCK - 1) // BLOCK):
+        for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            i = perm[k]
+            w = invm_n[i]
+            vs_nc[k, 0] = p_nc[i, 0] * w
+            vs_nc[k, 1] = p_nc[i, 1] * w
+            vs_nc[k, 2] = p_nc[i, 2] * w
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _displacement(pos_nc, ref_nc, out2):
     """(max |d|^2, squared half-diagonal of the bounding box of the displacements d).
 
@@ -345,7 +354,7 @@ def _displacement(pos_nc, ref_nc, out2):
     """
     n = pos_nc.shape[0]
     nt = out2.shape[0]
-    for t in range(nt):
+    for t in prange(nt):
         a = t * n // nt
         b = (t + 1) * n // nt
         m = 0.0
@@ -477,7 +486,7 @@ class NeighborList:
         self._cell = None
         self._pbc = None
         self._cap = 0
-        self._disp = np.zeros((1, 7))
+        self._disp = np.zeros((DISP_BLOCKS, 7))
 
     def update(self, positions, cell, pbc):
         """Rebuild if needed; return True when rebuilt."""
