@@ -20,12 +20,15 @@ STATE_ARRAYS = ("material", "bonds0", "id")
 ATTRACTION = ("all", "initial")
 
 
-def mark_initial_bonds(atoms, rc=DEFAULT_RC):
+def mark_initial_bonds(atoms, rc=DEFAULT_RC, within=None):
     """Record the pairs within ``rc * r0_ab`` now as the set-up bonds (``attraction="initial"``).
 
     Writes ``atoms.arrays['bonds0']``: for every particle the stable ids
     (``arrays['id']``) of its bonded partners, padded with -1.  Being a
     per-particle array it follows slicing, sorting, H5MD and checkpoints.
+    ``within``: name of a per-particle label array (e.g. ``"grain"``); only
+    pairs with equal labels >= 0 are bonded, so pairs across grain boundaries
+    only repel.
     """
     calc = ClusterDynamics(rc=rc)
     calc.setup(atoms)
@@ -38,6 +41,11 @@ def mark_initial_bonds(atoms, rc=DEFAULT_RC):
     types = calc._check_types(atoms)
     cut = np.sqrt(calc.meta[types[i], types[j], 2])
     keep = r < cut
+    if within is not None:
+        if within not in atoms.arrays:
+            raise InputError("within", within, f"a per-particle array of the Atoms ({sorted(atoms.arrays)})")
+        lab = np.asarray(atoms.arrays[within])
+        keep &= (lab[i] == lab[j]) & (lab[i] >= 0)
     i, j = i[keep], j[keep]
     counts = np.bincount(i, minlength=n)
     width = max(1, int(counts.max()) if n else 1)
