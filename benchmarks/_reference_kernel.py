@@ -12,7 +12,7 @@ from numba import njit, prange
 @njit(cache=True, parallel=True)
 def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k, f_mc, stat_k):
     nb = coef.shape[2]
-    rmin = meta[0, 0, 0]
+    smin = meta[0, 0, 0]
     invh = meta[0, 0, 1]
     cut2 = meta[0, 0, 2]
     rmin2 = meta[0, 0, 3]
@@ -46,8 +46,7 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
                 if r2 < rmin2:
                     nclose += 1
                     continue
-                r = np.sqrt(r2)
-                x = (r - rmin) * invh
+                x = (r2 - smin) * invh
                 kb = int(x)
                 if kb >= nb:
                     kb = nb - 1
@@ -57,7 +56,7 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
                 c2 = coef[0, 0, kb, 2]
                 c3 = coef[0, 0, kb, 3]
                 energy += c0 + t * (c1 + t * (c2 + t * c3))
-                s_ = -(c1 + t * (2.0 * c2 + 3.0 * t * c3)) * invh / r
+                s_ = -2.0 * (c1 + t * (2.0 * c2 + 3.0 * t * c3)) * invh
                 fx = s_ * dx
                 fy = s_ * dy
                 fz = s_ * dz

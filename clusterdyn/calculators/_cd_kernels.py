@@ -23,8 +23,10 @@ variant; LLVM removes the code of every term a variant does not use.
   kernels, which also serve single-material runs that use it).
 
 Table layout (potentials.build_tables): ``coef[a, b, k, 0:4]`` cubic
-coefficients of the shifted pair energy in bin k; ``meta[a, b]`` =
-(r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2, E(cutoff), r0_ab^2).
+coefficients of the shifted pair energy in bin k of a grid uniform in
+``s = r^2``; ``meta[a, b]`` = (s_min, 1/h_s, cutoff^2, r_min^2 (= s_min),
+1/r0_ab^2, E(cutoff), r0_ab^2).  The pair force is ``-2 dE/ds`` times the
+separation vector: no square root or division in the loop.
 
 ``attraction="initial"`` (physics.md 1.5): a pair not listed in ``bonds_nk``
 (partner ids bonded at set-up, -1 padded, one row per particle, caller's
@@ -168,7 +170,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
     nb = coef.shape[2]
     a = 0
     b = 0
-    rmin = meta[0, 0, 0]
+    smin = meta[0, 0, 0]
     invh = meta[0, 0, 1]
     cut2 = meta[0, 0, 2]
     rmin2 = meta[0, 0, 3]
@@ -231,11 +233,10 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[j]])
                 if free and r2 >= meta[a, b, 6]:
                     continue
-            r = np.sqrt(r2)
             if MULTI:
-                rmin = meta[a, b, 0]
+                smin = meta[a, b, 0]
                 invh = meta[a, b, 1]
-            x = (r - rmin) * invh
+            x = (r2 - smin) * invh
             kb = int(x)
             if kb >= nb:
                 kb = nb - 1
@@ -250,7 +251,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 if free:
                     e += meta[a, b, 5]
             energy += e
-            s_ = -de * invh / r
+            s_ = -2.0 * de * invh
             fx = s_ * dx
             fy = s_ * dy
             fz = s_ * dz

@@ -93,8 +93,8 @@ class ClusterDynamics(Calculator):
         Cluster size of each id, Angstrom.
     skin : float, optional
         Verlet skin as a multiple of the smallest r0 (default: :func:`default_skin`).
-    n_table : int, default :data:`clusterdyn.potentials.N_BINS` (2500)
-        Bins of the cubic-Hermite pair tables over [R_MIN_FACTOR r0, rc r0].
+    n_table : int, default :data:`clusterdyn.potentials.N_BINS` (10000)
+        Bins of the cubic-Hermite pair tables, uniform in r^2 over [(R_MIN_FACTOR r0)^2, (rc r0)^2].
     attraction : "all" or "initial"
         ``"initial"``: attraction only between pairs bonded at set-up
         (``atoms.arrays['bonds0']``, see :func:`mark_initial_bonds`); pairs that
@@ -328,10 +328,10 @@ class ClusterDynamics(Calculator):
             r = math.sqrt(stat[k, 1]) * r0ab
             raise InstabilityError(
                 f"{int(nclose)} pair(s) closer than the potential's tabulated range "
-                f"(r_min = {self.meta[a, b, 0] / r0ab:.2f} r0); the time step is too large for this "
+                f"(r_min = {math.sqrt(self.meta[a, b, 3]) / r0ab:.2f} r0); the time step is too large for this "
                 "compression or velocity, or the sample overlaps",
                 step=step, particles=(i, j), quantity="distance r/r0", value=r / r0ab,
-                limit=self.meta[a, b, 0] / r0ab)
+                limit=math.sqrt(self.meta[a, b, 3]) / r0ab)
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         Calculator.calculate(self, atoms, properties, system_changes)

@@ -26,8 +26,9 @@ SQRT2 = math.sqrt(2.0)
 #: lattices push pairs well inside the densest cold-curve row (0.75 r0 for aluminium): at
 #: 6 km/s thermal collisions reach 0.4 r0, so the table runs down to compression delta = 37.
 R_MIN_FACTOR = 0.3
-#: bins of a pair table over [R_MIN_FACTOR r0, rc r0] (bin width 3.4e-4 r0 at rc = 1.15)
-N_BINS = 2500
+#: bins of a pair table, uniform in r^2 over [(R_MIN_FACTOR r0)^2, (rc r0)^2] (at rc = 1.15 a bin
+#: spans 2.5e-4 r0 at r0, 8.2e-4 r0 at 0.3 r0)
+N_BINS = 10000
 #: default cutoff, as a multiple of r0
 DEFAULT_RC = 1.15
 
@@ -159,50 +160,57 @@ class MixedPairPotential:
 
 
 class PairTable:
-    """Cubic-Hermite table of a pair law on ``[r_min, cutoff]`` for the kernels.
+    """Cubic-Hermite table of a pair law in ``s = r^2`` on ``[r_min^2, cutoff^2]`` for the kernels.
 
     Node values are E(r) - E(cutoff) (the energy shift, so total energy is
-    continuous when a pair crosses the cutoff) and slopes -f(r); within a bin
-    ``E = c0 + c1 t + c2 t^2 + c3 t^3`` with ``t = (r - r_k)/h`` and the
-    kernel's force is exactly ``-dE/dr`` of that cubic.
+    continuous when a pair crosses the cutoff) and slopes ``dE/ds = -f/(2r)``;
+    within a bin ``E = c0 + c1 t + c2 t^2 + c3 t^3`` with ``t = (s - s_k)/h_s``.
+    The kernel's force is exactly ``-dE/dr = -2 r dE/ds`` of that cubic: the
+    force on a pair is ``-2 (dE/ds) d`` along the separation ``d``, so the
+    kernels need neither a square root nor a division per pair.  ``r0^2`` is
+    a node (the force at rest is zero to round-off).
     """
 
     def __init__(self, law, n_bins=N_BINS):
         self.law = law
         self.cutoff = law.cutoff
         self.n_bins = int(n_bins)
-        # r0 is a node (so the force at rest is exactly zero); the grid reaches
-        # down to about R_MIN_FACTOR r0 with the same bin count for every pair type
-        rc = law.cutoff / law.r0
-        n_hi = max(1, int(round(self.n_bins * (rc - 1.0) / (rc - R_MIN_FACTOR))))
+        # r0^2 is a node; the grid reaches down to about (R_MIN_FACTOR r0)^2 with the
+        # same bin count for every pair type
+        s_c = law.cutoff ** 2
+        s_0 = law.r0 ** 2
+        s_lo = (R_MIN_FACTOR * law.r0) ** 2
+        n_hi = max(1, int(round(self.n_bins * (s_c - s_0) / (s_c - s_lo))))
         n_lo = self.n_bins - n_hi
-        self.h = (law.cutoff - law.r0) / n_hi
-        self.r_min = law.r0 - n_lo * self.h
-        r = self.r_min + self.h * np.arange(self.n_bins + 1)
-        r[-1] = self.cutoff
+        self.hs = (s_c - s_0) / n_hi
+        self.s_min = s_0 - n_lo * self.hs
+        self.r_min = math.sqrt(self.s_min)
+        sn = self.s_min + self.hs * np.arange(self.n_bins + 1)
+        sn[-1] = s_c
+        r = np.sqrt(sn)
         e = law.energy(r)
         f = law.force(r)
         self.e_shift = float(e[-1])
         self.f_cut = float(f[-1])
         e = e - self.e_shift
-        s = -f * self.h                      # dE/dt at nodes
+        d = -f / (2.0 * r) * self.hs          # dE/dt at nodes
         c = np.empty((self.n_bins, 4))
         c[:, 0] = e[:-1]
-        c[:, 1] = s[:-1]
-        c[:, 2] = 3.0 * (e[1:] - e[:-1]) - 2.0 * s[:-1] - s[1:]
-        c[:, 3] = 2.0 * (e[:-1] - e[1:]) + s[:-1] + s[1:]
+        c[:, 1] = d[:-1]
+        c[:, 2] = 3.0 * (e[1:] - e[:-1]) - 2.0 * d[:-1] - d[1:]
+        c[:, 3] = 2.0 * (e[:-1] - e[1:]) + d[:-1] + d[1:]
         self.coef = c
 
     def evaluate(self, r):
         """(E_shifted, f) from the table, for tests. r in [r_min, cutoff)."""
         r = np.asarray(r, dtype=float)
-        x = (r - self.r_min) / self.h
+        x = (r * r - self.s_min) / self.hs
         k = np.clip(x.astype(int), 0, self.n_bins - 1)
         t = x - k
         c = self.coef[k]
         e = c[..., 0] + t * (c[..., 1] + t * (c[..., 2] + t * c[..., 3]))
         de = c[..., 1] + t * (2.0 * c[..., 2] + 3.0 * t * c[..., 3])
-        return e, -de / self.h
+        return e, -2.0 * r * de / self.hs
 
 
 def build_tables(potentials, n_bins=N_BINS):
@@ -217,7 +225,8 @@ def build_tables(potentials, n_bins=N_BINS):
     -------
     coef_ttbk : (nt, nt, n_bins, 4) float64
     meta_ttm : (nt, nt, 7) float64
-        r_min, 1/h, cutoff^2, r_min^2, 1/r0_ab^2, E(cutoff) (the shift), r0_ab^2 per pair type.
+        r_min^2 (the table's first node in s = r^2), 1/h_s, cutoff^2, r_min^2, 1/r0_ab^2,
+        E(cutoff) (the shift), r0_ab^2 per pair type.
     tables : nested list of PairTable
     """
     nt = len(potentials)
@@ -232,6 +241,6 @@ def build_tables(potentials, n_bins=N_BINS):
         for b in range(nt):
             t = tables[a][b]
             coef[a, b] = t.coef
-            meta[a, b] = (t.r_min, 1.0 / t.h, t.cutoff ** 2, t.r_min ** 2, 1.0 / t.law.r0 ** 2, t.e_shift,
+            meta[a, b] = (t.s_min, 1.0 / t.hs, t.cutoff ** 2, t.s_min, 1.0 / t.law.r0 ** 2, t.e_shift,
                           t.law.r0 ** 2)
     return coef, meta, tables

@@ -18,6 +18,26 @@ def test_bonds_of_a_lattice():
     assert b.shape == (len(atoms), 12) and (b >= 0).all()
 
 
+def test_bonds_within_labels():
+    """Only pairs with equal labels >= 0 are bonded: e.g. no attraction across grain boundaries."""
+    atoms = fcc_packing("Al", R0, size=(3, 3, 3), pbc=True)
+    x = atoms.get_scaled_positions()[:, 0]
+    label = np.where(x < 0.5, 0, 1)
+    label[0] = -1
+    atoms.new_array("grain", label)
+    b = mark_initial_bonds(atoms, within="grain")
+    ids = atoms.arrays["id"]
+    n_bonded = 0
+    for i in range(len(atoms)):
+        partners = b[i][b[i] >= 0]
+        n_bonded += len(partners)
+        j = np.searchsorted(ids, partners)
+        assert (label[j] == label[i]).all() and (len(partners) == 0 or label[i] >= 0)
+    assert len(b[0][b[0] >= 0]) == 0 and 0 < n_bonded < 12 * len(atoms)
+    with pytest.raises(InputError, match="within"):
+        mark_initial_bonds(atoms, within="no_such_array")
+
+
 def test_conservative_with_new_contacts():
     atoms = fcc_packing("Al", R0, size=(4, 4, 4), pbc=False)
     mark_initial_bonds(atoms)
