@@ -34,7 +34,7 @@ from ..analysis.profiles import ProfileRecorder, write_profiles_csv
 from ..analysis.stress import particle_virials
 from ..build import Plate, fcc_packing, polycrystal, polycrystal_summary
 from ..build.lattice import SQRT2
-from ..calculators import ClusterDynamics
+from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet
@@ -113,12 +113,18 @@ def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False):
 
 def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * units.um, flyer=25.0,
                  target=50.0, width=16.0, grain_size=8.0, d_min=0.85, porosity=None, seed=1,
-                 noise=10 * units.m_s, J=50.0, dt_factor=TIMESTEP_FACTOR, relax_cycles=12):
+                 noise=10 * units.m_s, J=50.0, dt_factor=TIMESTEP_FACTOR, relax_cycles=12,
+                 boundaries="bonded"):
     """Two plates ready to collide; returns a dict with atoms, dynamics and bookkeeping.
 
     Lengths ``flyer``, ``target``, ``width`` are in r0.  The width is rounded
     to whole [100] repeat cells (sqrt 2 r0) so both samples have the same cross-section.
+    ``boundaries="repulsive"`` (polycrystal): only pairs within one grain attract
+    (``attraction="initial"`` with set-up bonds inside grains); pairs across a
+    grain boundary only repel, so grains can slide apart and over each other.
     """
+    if boundaries not in ("bonded", "repulsive"):
+        raise InputError("boundaries", boundaries, "bonded or repulsive")
     mat = get_material(material)
     if mat.curve is None:
         raise InputError("material", material, "a material with a cold curve (CD)")
@@ -135,7 +141,11 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
     Lx = (flyer + target + 30) * r0
     atoms.set_cell([Lx, W, W])
     atoms.pbc = (False, True, True)
-    calc = ClusterDynamics()
+    if sample == "polycrystal" and boundaries == "repulsive":
+        mark_initial_bonds(atoms, within="grain")
+        calc = ClusterDynamics(attraction="initial")
+    else:
+        calc = ClusterDynamics()
     atoms.calc = calc
     relax = None
     if sample == "polycrystal" and relax_cycles:
@@ -421,6 +431,8 @@ PARAMS = [
           "while the wave crosses the target)", kind="str"),
     Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
     Param("relax_cycles", 12, "polycrystal: quench cycles of 100 steps before the impact", kind="int", low=0),
+    Param("boundaries", "bonded", "polycrystal: grain-boundary pairs attract like any pair (bonded) or only "
+          "repel (repulsive: set-up bonds inside grains only)", kind="choice", choices=("bonded", "repulsive")),
 ]
 
 
@@ -477,7 +489,7 @@ def plate_impact_scene(vals, out=None, progress=True):
     for name in samples:
         setup = build_impact(name, "Al", vals["v"], vals["r0"], vals["flyer"], vals["target"], vals["width"],
                              vals["grain_size"], vals["d_min"], vals["porosity"], vals["seed"], vals["noise"],
-                             vals["J"], relax_cycles=vals["relax_cycles"])
+                             vals["J"], relax_cycles=vals["relax_cycles"], boundaries=vals["boundaries"])
         run = run_impact(setup, vals["duration"], vals["frames"], progress=progress)
         an = analyse_impact(setup, run)
         results[name] = (setup, run, an)

@@ -69,3 +69,17 @@ def test_polycrystal_shock_tiny():
                                                "frames": "15", "porosity": "0.15"}, progress=False)
     q = res.quantities
     assert 3.0 < q["pc_D"].value < 9.0 and 3.0 < q["sc_D"].value < 9.0
+
+
+def test_repulsive_grain_boundaries():
+    s = build_impact("polycrystal", r0=10 * units.um, flyer=8, target=16, width=6, grain_size=5,
+                     relax_cycles=2, boundaries="repulsive")
+    at = s["atoms"]
+    assert s["calc"] is at.calc and at.calc.parameters.attraction == "initial"
+    grain, ids, bonds = at.arrays["grain"], at.arrays["id"], at.arrays["bonds0"]
+    row = np.empty(ids.max() + 1, np.int64)
+    row[ids] = np.arange(len(at))
+    i, k = np.nonzero(bonds >= 0)
+    assert len(i) > 0 and np.all(grain[row[bonds[i, k]]] == grain[i])
+    with pytest.raises(InputError, match="boundaries"):
+        build_impact("polycrystal", flyer=8, target=16, width=6, grain_size=5, boundaries="glued")
