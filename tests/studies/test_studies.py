@@ -12,6 +12,7 @@ from clusterdyn.studies import get_study, study_names
 from clusterdyn.studies.common import ListParam, pareto_front
 
 TINY = {"size": "16x3x3", "frames": "30"}
+NO_REFINE = {"refine_length": "0"}   # tiny samples: no automatic rerun on a long one
 
 
 def test_registry_and_lists():
@@ -29,7 +30,7 @@ def test_registry_and_lists():
 
 
 def test_hugoniot_study_tiny(tmp_path):
-    res = get_study("hugoniot")({**TINY, "u": "1,3", "compare_J": "50", "compare_attraction": "true"},
+    res = get_study("hugoniot")({**TINY, **NO_REFINE, "u": "1,3", "compare_J": "50", "compare_attraction": "true"},
                                 out=tmp_path, progress=False)
     groups = [r["group"] for r in res["runs"]]
     assert groups.count("main") == 2 and groups.count("damped") == 2 and groups.count("attraction=initial") == 2
@@ -46,19 +47,19 @@ def test_hugoniot_study_tiny(tmp_path):
     data = json.loads((tmp_path / "hugoniot.json").read_text())
     assert len(data["runs"]) == 6
     # a second call reads the runs back instead of running them again
-    again = get_study("hugoniot")({**TINY, "u": "1,3"}, out=tmp_path, progress=False, quiet=True)
+    again = get_study("hugoniot")({**TINY, **NO_REFINE, "u": "1,3"}, out=tmp_path, progress=False, quiet=True)
     assert [r["D"] for r in again["runs"]] == [r["D"] for r in res["runs"][:2]]
 
 
 def test_hugoniot_study_low_u_and_two_phase(tmp_path):
-    res = get_study("hugoniot")({"size": "12x3x3", "u": "2", "low_u": "0.1,0.2", "low_u_size": "40x3x3",
+    res = get_study("hugoniot")({**NO_REFINE, "size": "12x3x3", "u": "2", "low_u": "0.1,0.2", "low_u_size": "40x3x3",
                                  "low_u_frames": "30", "uniaxial": "false", "plots": "false"},
                                 out=tmp_path / "lowu", progress=False)
     lu = res["summary"]["low_u"]
     assert lu["lattice_cL"] == pytest.approx(np.sqrt(1.5) * lu["c0"])
     assert abs(lu["D0"] / lu["lattice_cL"] - 1) < 0.05
     assert "noise_effect" in lu
-    two = get_study("hugoniot")({"case": "hBN-B4C", "size": "20x6x6", "inclusion_diameter": "12um", "u": "2",
+    two = get_study("hugoniot")({**NO_REFINE, "case": "hBN-B4C", "size": "20x6x6", "inclusion_diameter": "12um", "u": "2",
                                  "phase_u": "3", "frames": "30", "uniaxial": "false"},
                                 out=tmp_path / "two", progress=False)
     mix = two["summary"]["mixture"]["rows"]
@@ -98,7 +99,7 @@ def test_stability_study_tiny(tmp_path):
 
 def test_cli_study_json(tmp_path):
     out = subprocess.run([sys.executable, "-m", "clusterdyn.cli", "study", "hugoniot", "--set", "u=3",
-                          "--set", "size=12x3x3", "--set", "uniaxial=false", "--set", "plots=false", "--json",
+                          "--set", "size=12x3x3", "--set", "refine_length=0", "--set", "uniaxial=false", "--set", "plots=false", "--json",
                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
@@ -120,3 +121,23 @@ def test_conservation_verdict_names_steady_runs_off_the_checks():
     assert "off the conservation checks: u = 3 km/s (mass -4.4%, momentum +5.9%)" in text
     assert "u = 1 km/s" not in text.split("off the conservation checks")[1]
     assert "off the conservation" not in _conservation_verdict(rows[1:])
+
+
+def test_steady_run_off_the_checks_is_run_again_on_a_longer_sample(tmp_path, monkeypatch):
+    import clusterdyn.studies.hugoniot as H
+    monkeypatch.setattr(H, "MASS_TOL", 1e-5)      # every steady run now misses the mass check
+    res = get_study("hugoniot")({**TINY, "u": "1", "refine_length": "24", "uniaxial": "false", "plots": "false"},
+                                out=tmp_path, progress=False, quiet=True)
+    (r,) = res["runs"]
+    assert r["size"] == "24x3x3" and r["size_short"] == "16x3x3" and r["steady_short"]
+    assert r["D"] != r["D_short"] and abs(r["mass_check_short"]) > 1e-5
+    text = H._conservation_verdict(res["runs"])
+    assert "run again on a longer sample" in text and "16x3x3 -> 24x3x3" in text
+    # only steady runs of the sweep's groups that miss a check, on samples shorter than refine_length
+    assert H._refine_size(r, "main", (24, 3, 3), 24) is None
+    off = {"steady": True, "mass_check": 0.1, "momentum_check": 0.0}
+    assert H._refine_size(off, "main", (16, 3, 3), 24) == "24x3x3"
+    assert H._refine_size({**off, "steady": False}, "main", (16, 3, 3), 24) is None
+    assert H._refine_size(off, "main", (24, 3, 3), 24) is None
+    assert H._refine_size(off, "main", (16, 3, 3), 0) is None
+    assert H._refine_size(off, "low-u", (16, 3, 3), 24) is None
