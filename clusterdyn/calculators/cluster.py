@@ -121,6 +121,7 @@ class ClusterDynamics(Calculator):
         self._buffers = None
         self._types_key = None
         self._types_cache = None
+        self._spec_cache = None
 
     # -- set-up ------------------------------------------------------------------
     def set(self, **kwargs):
@@ -138,6 +139,16 @@ class ClusterDynamics(Calculator):
         return changes
 
     def _material_spec(self, atoms):
+        raw = (self.parameters.materials, self.parameters.r0, atoms.info.get("cd_materials"),
+               atoms.info.get("cd_r0"))
+        probe = repr(raw)
+        if self._spec_cache is not None and self._spec_cache[0] == probe:
+            return self._spec_cache[1]
+        spec = self._material_spec_uncached(atoms)
+        self._spec_cache = (probe, spec)
+        return spec
+
+    def _material_spec_uncached(self, atoms):
         mats = self.parameters.materials
         r0 = self.parameters.r0
         if mats is None:

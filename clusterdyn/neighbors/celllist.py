@@ -485,6 +485,7 @@ class NeighborList:
         self.perm_n = None
         self._cell = None
         self._pbc = None
+        self._key = None
         self._cap = 0
         self._disp = np.zeros((DISP_BLOCKS, 7))
 
@@ -492,10 +493,12 @@ class NeighborList:
         """Rebuild if needed; return True when rebuilt."""
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         cell = np.asarray(cell, dtype=float).reshape(3, 3)
-        pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,))
+        pbc = np.asarray(pbc, dtype=bool)
+        if pbc.shape != (3,):
+            pbc = np.broadcast_to(pbc, (3,))
         use_threads(pos.shape[0])
-        if (self.ref_nc is None or self.ref_nc.shape != pos.shape
-                or not np.array_equal(cell, self._cell) or not np.array_equal(pbc, self._pbc)
+        key = (tuple(cell.ravel().tolist()), tuple(pbc.tolist()))
+        if (self.ref_nc is None or self.ref_nc.shape != pos.shape or key != self._key
                 or (pos.shape[0] and self._moved(pos))):
             self.build(pos, cell, pbc)
             return True
@@ -555,6 +558,8 @@ class NeighborList:
         self.ref_nc = pos.copy()
         self._cell = np.array(cell, dtype=float).reshape(3, 3)
         self._pbc = periodic_c.copy()
+        self._key = (tuple(self._cell.ravel().tolist()),
+                     tuple(np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).tolist()))
         self.nbuilds += 1
 
     def _image_table(self, krange, box):
