@@ -25,6 +25,9 @@ import numba  # noqa: E402
 
 #: particles per thread below which a kernel runs on fewer threads
 MIN_PARTICLES_PER_THREAD = 16384
+#: particles per block of the streaming passes (kicks, drift, gathers): fixed, so their
+#: results do not depend on the thread count
+STREAM_BLOCK = 8192
 _MAX = [None]
 
 

@@ -2,7 +2,7 @@
 
 They stream through memory at about a nanosecond per particle, so on more
 than one thread they are a visible share of a step (Amdahl): they run in
-parallel over fixed blocks of :data:`BLOCK` particles.  Every result is the
+parallel over fixed blocks of ``clusterdyn.parallel.STREAM_BLOCK`` particles.  Every result is the
 same on any thread count: kicks and drifts are per particle, and the largest
 speed is a maximum over blocks taken in block order.  Over fewer particles
 than ``clusterdyn.parallel.MIN_PARTICLES_PER_THREAD`` the dynamics runs them
@@ -12,8 +12,7 @@ on one thread (no fork and join).
 import numpy as np
 from numba import njit, prange
 
-#: particles per block of the streaming passes
-BLOCK = 8192
+from ..parallel import STREAM_BLOCK as BLOCK
 
 
 @njit(cache=True, parallel=True)

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import InputError
-from ..parallel import use_threads
+from ..parallel import STREAM_BLOCK as BLOCK, use_threads
 
 #: blocks of the displacement check (fixed: the result does not depend on the thread count)
 DISP_BLOCKS = 16
@@ -314,10 +314,6 @@ def _compact(nbr_nk, img_nk, cnt_n, first_n, j_p, img_p):
             img_p[p + q] = img_nk[i, q]
 
 
-#: rows per block of the streaming passes (gathers, displacement check)
-BLOCK = 8192
-
-
 @njit(cache=True, parallel=True)
 def gather_positions(pos_nc, perm, offs_nc, xs_nc):
     """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels."""
@@ -483,8 +479,6 @@ class NeighborList:
         self.nbuilds = 0
         self.ref_nc = None
         self.perm_n = None
-        self._cell = None
-        self._pbc = None
         self._key = None
         self._cap = 0
         self._disp = np.zeros((DISP_BLOCKS, 7))
@@ -556,9 +550,8 @@ class NeighborList:
         else:
             self._build_unsorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
         self.ref_nc = pos.copy()
-        self._cell = np.array(cell, dtype=float).reshape(3, 3)
-        self._pbc = periodic_c.copy()
-        self._key = (tuple(self._cell.ravel().tolist()),
+        # what update() compares to decide whether the box changed
+        self._key = (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
                      tuple(np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).tolist()))
         self.nbuilds += 1
 
