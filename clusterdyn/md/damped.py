@@ -20,7 +20,6 @@ from ase.md.md import MolecularDynamics
 
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
-from ..potentials import R_MIN_FACTOR
 from ..parallel import use_threads
 from . import _integrate as I
 from .boundaries import Piston, RigidWall
@@ -199,9 +198,9 @@ class DampedVerlet(MolecularDynamics):
         key = (a, b, self.dt)
         r = self._safe.get(key)
         if r is None:
-            law = self.calc.law(a, b)
-            lo = R_MIN_FACTOR * law.r0
-            grid = np.linspace(lo, law.r0, SAFE_GRID)
+            table = self.calc.tables[a][b]
+            lo = table.r_min
+            grid = np.linspace(lo, table.law.r0, SAFE_GRID)
             lim = pair_stability_limit(self.calc, a, b, grid)
             bad = grid[self.dt > lim]
             r = (bad.max() if bad.size else lo) + (grid[1] - grid[0])

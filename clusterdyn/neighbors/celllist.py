@@ -397,6 +397,12 @@ def _displacement(pos_nc, ref_nc, out2):
     return m, h2
 
 
+def _box_key(cell, pbc):
+    """What :meth:`NeighborList.update` compares to tell whether the box changed since the build."""
+    return (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
+            tuple(np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).tolist()))
+
+
 def check_cell(cell, pbc):
     """Return (box lengths, periodic flags) of an open or periodic orthorhombic cell.
 
@@ -491,7 +497,7 @@ class NeighborList:
         if pbc.shape != (3,):
             pbc = np.broadcast_to(pbc, (3,))
         use_threads(pos.shape[0])
-        key = (tuple(cell.ravel().tolist()), tuple(pbc.tolist()))
+        key = _box_key(cell, pbc)
         if (self.ref_nc is None or self.ref_nc.shape != pos.shape or key != self._key
                 or (pos.shape[0] and self._moved(pos))):
             self.build(pos, cell, pbc)
@@ -550,9 +556,7 @@ class NeighborList:
         else:
             self._build_unsorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
         self.ref_nc = pos.copy()
-        # what update() compares to decide whether the box changed
-        self._key = (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
-                     tuple(np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).tolist()))
+        self._key = _box_key(cell, pbc)
         self.nbuilds += 1
 
     def _image_table(self, krange, box):

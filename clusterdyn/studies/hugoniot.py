@@ -219,14 +219,16 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
             for u in pu:
                 plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
 
+    def run_row(ov):
+        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
+        return res, shock_row(res, err, wall), scene.display(scene.parse(ov))
+
     rows = []
     bar = progress_bar(len(plan), f"hugoniot {tag}", progress)
     for n, (group, ov) in enumerate(plan):
         if bar is not None:
             bar.set_postfix_str(f"{group} u={ov['u']}")
-        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
-        row = shock_row(res, err, wall)
-        pv = scene.display(scene.parse(ov))
+        res, row, pv = run_row(ov)
         long_size = _refine_size(row, group, pv["size"], v["refine_length"])
         if long_size is not None:
             if bar is not None:
@@ -235,10 +237,8 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
                                                          "steady", "wall_s")}
             short["size_short"] = "x".join(map(str, pv["size"]))
             ov = _fwd_with(ov, size=long_size)
-            res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
-            row = shock_row(res, err, wall)
+            res, row, pv = run_row(ov)
             row.update(short)
-            pv = scene.display(scene.parse(ov))
         row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
                     "J": pv["J"], "attraction": pv["attraction"], "noise_m_s": pv["noise"]["value"],
                     "size": "x".join(map(str, pv["size"])), "direction": pv["direction"]})
