@@ -21,6 +21,12 @@ variant; LLVM removes the code of every term a variant does not use.
 - ``PP``: per-particle energies and virials (``energies``, ``stresses``).
 - ``INIT``: ``attraction="initial"`` (a run-time flag of the multi-material
   kernels, which also serve single-material runs that use it).
+- ``ENERGY``: the pair energy (the dynamics' steps leave it out, about a
+  tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it only
+  when it is read).
+
+The periodic image shift is added only to pairs that cross a periodic face
+(image code other than the middle of ``image_sc``).
 
 Table layout (potentials.build_tables): ``coef[a, b, k, 0:4]`` cubic
 coefficients of the shifted pair energy in bin k of a grid uniform in
@@ -156,9 +162,10 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
 @njit(inline="always")
 def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
            f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-           MULTI, DAMP, VIR, PP, INIT):
+           MULTI, DAMP, VIR, PP, INIT, ENERGY):
     """The pair loop of chunk k (see the module docstring for the flags)."""
     off = boff_k[k] - span_k2[k, 0]
+    zero_img = image_sc.shape[0] // 2
     for r in range(boff_k[k], boff_k[k + 1]):
         f_mc[r, 0] = 0.0
         f_mc[r, 1] = 0.0
@@ -206,10 +213,14 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
         fzi = 0.0
         for p in range(first_n[i], first_n[i + 1]):
             j = j_p[p]
+            dx = xs_nc[j, 0] - xi
+            dy = xs_nc[j, 1] - yi
+            dz = xs_nc[j, 2] - zi
             s = img_p[p]
-            dx = xs_nc[j, 0] + image_sc[s, 0] - xi
-            dy = xs_nc[j, 1] + image_sc[s, 1] - yi
-            dz = xs_nc[j, 2] + image_sc[s, 2] - zi
+            if s != zero_img:
+                dx += image_sc[s, 0]
+                dy += image_sc[s, 1]
+                dz += image_sc[s, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if MULTI:
                 b = type_s[j]
@@ -245,12 +256,14 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             c1 = coef[a, b, kb, 1]
             c2 = coef[a, b, kb, 2]
             c3 = coef[a, b, kb, 3]
-            e = c0 + t * (c1 + t * (c2 + t * c3))
             de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
-            if INIT:
-                if free:
-                    e += meta[a, b, 5]
-            energy += e
+            e = 0.0
+            if ENERGY or PP:
+                e = c0 + t * (c1 + t * (c2 + t * c3))
+                if INIT:
+                    if free:
+                        e += meta[a, b, 5]
+                energy += e
             s_ = -2.0 * de * invh
             fx = s_ * dx
             fy = s_ * dy
@@ -320,11 +333,11 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
 @njit(cache=True, parallel=True)
 def cd_forces_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                 f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
-    """One material: forces and energy (the dynamics' undamped step)."""
+    """One material: forces only (the dynamics' undamped step)."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, False, False, False)
+               False, False, False, False, False, False)
 
 
 @njit(cache=True, parallel=True)
@@ -335,18 +348,18 @@ def cd_forces_virial_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta,
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, False, False)
+               False, False, True, False, False, True)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_damped_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                        boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
                        initial_only):
-    """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order)."""
+    """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order), no energy."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, True, False, False, False)
+               False, True, False, False, False, False)
 
 
 @njit(cache=True, parallel=True)
@@ -357,7 +370,7 @@ def cd_forces_per_particle_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef,
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, True, False)
+               False, False, True, True, False, True)
 
 
 @njit(cache=True, parallel=True)
@@ -367,18 +380,28 @@ def cd_forces_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bo
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, False, initial_only)
+               True, False, True, False, initial_only, True)
+
+
+@njit(cache=True, parallel=True)
+def cd_forces_only_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+                         f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+    """Several materials (or attraction='initial'): forces only (the dynamics' undamped step)."""
+    for k in prange(bounds_k.shape[0] - 1):
+        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
+               True, False, False, False, initial_only, False)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_damped_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                            boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
                            initial_only):
-    """Several materials (or attraction='initial'): conservative + pair damping forces."""
+    """Several materials (or attraction='initial'): conservative + pair damping forces, no energy."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, True, False, False, initial_only)
+               True, True, False, False, initial_only, False)
 
 
 @njit(cache=True, parallel=True)
@@ -389,7 +412,7 @@ def cd_forces_per_particle_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, c
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, True, initial_only)
+               True, False, True, True, initial_only, True)
 
 
 #: kernel by (multi, mode), mode in "forces", "virial", "damped", "per_particle"
@@ -398,7 +421,7 @@ KERNELS = {
     (False, "virial"): cd_forces_virial_1,
     (False, "damped"): cd_forces_damped_1,
     (False, "per_particle"): cd_forces_per_particle_1,
-    (True, "forces"): cd_forces_multi,
+    (True, "forces"): cd_forces_only_multi,
     (True, "virial"): cd_forces_multi,
     (True, "damped"): cd_forces_damped_multi,
     (True, "per_particle"): cd_forces_per_particle_multi,

@@ -233,15 +233,18 @@ class ClusterDynamics(Calculator):
     _NO_TYPES = np.zeros(0, np.int64)
 
     # -- the pair loop ---------------------------------------------------------
-    def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True):
+    def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True,
+                energy=True):
         """Run the pair loop on ``atoms`` (no copy).  Returns a dict of results.
 
         ``damping = (momenta_nc, invmass_n, eta_tt)`` selects the fused damped
         kernel (used by :class:`clusterdyn.md.DampedVerlet`); its forces include
         the damping term.  ``out``: an (N, 3) array to receive the forces
-        (default: a new one).  ``virial=False`` skips the cell virial (the
-        dynamics' undamped step).  Raises InstabilityError if a pair is closer
-        than the tabulated range.
+        (default: a new one).  ``virial=False`` skips the cell virial and
+        ``energy=False`` the pair energy (the dynamics' steps; the result's
+        ``"energy"`` is then None).  With damping the energy takes a second,
+        conservative pass.  Raises InstabilityError if a pair is closer than
+        the tabulated range.
 
         The kernel is chosen per call from what is asked: one material or
         several (or ``attraction="initial"``), with or without damping, cell
@@ -269,7 +272,7 @@ class ClusterDynamics(Calculator):
             mode = "damped"
         elif per_particle:
             mode = "per_particle"
-        elif virial:
+        elif virial or energy:
             mode = "virial"
         else:
             mode = "forces"
@@ -285,7 +288,7 @@ class ClusterDynamics(Calculator):
         forces = np.empty((n, 3)) if out is None else out
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
         K.reduce_rows(lay["f_m3"], *red, forces)
-        res = {"forces": forces, "energy": float(stat[:, 0].sum())}
+        res = {"forces": forces, "energy": float(stat[:, 0].sum()) if mode not in ("forces", "damped") else None}
         if mode in ("virial", "per_particle"):
             res["virial"] = vir.sum(axis=0)
         if per_particle:
@@ -299,6 +302,8 @@ class ClusterDynamics(Calculator):
         self.last_stats = {"min_r_over_r0": math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
                            "closest": (int(stat[k, 2]), int(stat[k, 3])), "npairs": nl.npairs,
                            "nbuilds": nl.nbuilds}
+        if mode == "damped" and energy:
+            res["energy"] = self.compute(atoms, step=step, virial=False)["energy"]
         return res
 
     _NO_ETA = np.zeros((0, 0))

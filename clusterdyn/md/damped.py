@@ -102,7 +102,9 @@ class DampedVerlet(MolecularDynamics):
     forces : (N, 3) array
         Total forces of the last step (with damping if on; piston rows zeroed).
     potential_energy : float
-        Shifted pair energy of the last step, eV.
+        Shifted pair energy of the current positions, eV.  The steps' force
+        loop leaves the energy out; it is computed (one conservative pass)
+        when first read after a step.
     """
 
     def __init__(self, atoms, timestep=None, J=50, *, check_interval=1, trajectory=None,
@@ -143,7 +145,7 @@ class DampedVerlet(MolecularDynamics):
                          **kwargs)
         self.check_interval = int(check_interval)
         self.forces = None
-        self.potential_energy = None
+        self._epot = None
         self._eta = calc.damping_matrix(J) if J is not None else None
         self._v2 = None
         self._fbuf = None
@@ -175,7 +177,7 @@ class DampedVerlet(MolecularDynamics):
                 self._fbuf = [np.empty((n, 3)), np.empty((n, 3))]
             self._fturn ^= 1
             out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn],
-                                    virial=False)
+                                    virial=False, energy=False)
             forces = out["forces"]
             self.potential_energy = out["energy"]
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
@@ -187,6 +189,16 @@ class DampedVerlet(MolecularDynamics):
             c.adjust_forces(atoms, forces)
         self.timings["forces"] += time.perf_counter() - t0
         return forces
+
+    @property
+    def potential_energy(self):
+        if self._epot is None and self.forces is not None and isinstance(self.calc, ClusterDynamics):
+            self._epot = self.calc.compute(self.atoms, step=self.nsteps, virial=False)["energy"]
+        return self._epot
+
+    @potential_energy.setter
+    def potential_energy(self, value):
+        self._epot = value
 
     def _safe_distance(self, a, b):
         """Distance above which the (a, b) pair law's stability limit exceeds the time step.
@@ -295,7 +307,7 @@ class DampedVerlet(MolecularDynamics):
 
     def get_total_energy(self):
         """Kinetic + (shifted) potential energy of the current step, eV."""
-        if self.potential_energy is None:
+        if self.forces is None:
             self._refresh_properties()
         return self.get_kinetic_energy() + self.potential_energy
 
