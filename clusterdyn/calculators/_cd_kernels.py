@@ -125,8 +125,14 @@ def chunk_layout(first_n, j_p, nchunks):
 
 
 @njit(cache=True, parallel=True)
-def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc):
-    """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic)."""
+def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc, p_nc, h):
+    """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic).
+
+    With three columns and ``p_nc`` non-empty, also the velocity-Verlet half
+    kick ``p[perm[i]] += h * out[perm[i]]`` in the same pass (the dynamics'
+    second kick; the constraints' momenta are set after it).
+    """
+    kick = p_nc.shape[0] > 0
     nk = bounds_k.shape[0] - 1
     nc = buf_mc.shape[1]
     for k in prange(nk):
@@ -148,6 +154,10 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
                 out_nc[o, 0] = sx
                 out_nc[o, 1] = sy
                 out_nc[o, 2] = sz
+                if kick:
+                    p_nc[o, 0] += h * sx
+                    p_nc[o, 1] += h * sy
+                    p_nc[o, 2] += h * sz
             else:
                 for c in range(nc):
                     out_nc[o, c] = 0.0

@@ -11,7 +11,8 @@ from ..errors import InputError, InstabilityError
 from ..materials import get_material
 from ..neighbors import NeighborList
 from ..potentials import DEFAULT_RC, N_BINS, ClusterPotential, MixedPairPotential, build_tables, check_rc
-from ..neighbors.celllist import gather_velocities
+from ..neighbors.celllist import gather_velocities, kick_drift_gather
+from ..parallel import STREAM_BLOCK, use_threads
 from . import _cd_kernels as K
 
 #: arrays besides ASE's own whose change invalidates cached results
@@ -119,6 +120,8 @@ class ClusterDynamics(Calculator):
         self.potentials = None
         self.last_stats = None
         self._buffers = None
+        self._advanced = None
+        self._bstat = None
         self._types_key = None
         self._types_cache = None
         self._spec_cache = None
@@ -185,6 +188,8 @@ class ClusterDynamics(Calculator):
         self.masses_t = np.array([p.mass for p in self.potentials])
         self._setup_key = key
         self._buffers = None
+        self._advanced = None
+        self._bstat = None
         self._types_key = None
 
     def _check_types(self, atoms):
@@ -234,7 +239,7 @@ class ClusterDynamics(Calculator):
 
     # -- the pair loop ---------------------------------------------------------
     def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True,
-                energy=True):
+                energy=True, kick=None):
         """Run the pair loop on ``atoms`` (no copy).  Returns a dict of results.
 
         ``damping = (momenta_nc, invmass_n, eta_tt)`` selects the fused damped
@@ -243,8 +248,10 @@ class ClusterDynamics(Calculator):
         (default: a new one).  ``virial=False`` skips the cell virial and
         ``energy=False`` the pair energy (the dynamics' steps; the result's
         ``"energy"`` is then None).  With damping the energy takes a second,
-        conservative pass.  Raises InstabilityError if a pair is closer than
-        the tabulated range.
+        conservative pass.  ``kick = (momenta_nc, h)`` adds ``h * forces`` to
+        the momenta in the pass that sums the forces (the dynamics' second half
+        kick).  Raises InstabilityError if a pair is closer than the tabulated
+        range.
 
         The kernel is chosen per call from what is asked: one material or
         several (or ``attraction="initial"``), with or without damping, cell
@@ -255,20 +262,26 @@ class ClusterDynamics(Calculator):
         n = len(atoms)
         pos = atoms.arrays["positions"]
         nl = self.nl
-        nl.update(pos, atoms.cell.array, atoms.pbc)
+        adv, self._advanced = self._advanced, None
+        if adv is not None and (adv[0] != id(pos) or adv[1] != nl.nbuilds or adv[5] != self._setup_key):
+            adv = None
+        rebuilt = nl.update(pos, atoms.cell.array, atoms.pbc, displacement=None if adv is None else adv[2:4])
+        fresh = adv is not None and not rebuilt  # the gathers of _advance are current
         initial, bonds, ids = self._bond_args(atoms)
         multi = len(self.potentials) > 1 or initial
         types = self._types(atoms, nl.nbuilds)
         lay = self._layout(n, per_particle, damping is not None)
         perm = nl.perm_n
         xs = lay["xs"]
-        nl.sorted_positions(pos, out=xs)
+        if not fresh:
+            nl.sorted_positions(pos, out=xs)
         types_s = types[perm] if multi else self._NO_TYPES
         vs, eta = self._NO_V, self._NO_ETA
         if damping is not None:
             p_nc, invm_n, eta = damping
             vs = lay["vs"]
-            gather_velocities(p_nc, invm_n, perm, vs)
+            if not (fresh and adv[4]):
+                gather_velocities(p_nc, invm_n, perm, vs)
             mode = "damped"
         elif per_particle:
             mode = "per_particle"
@@ -287,16 +300,19 @@ class ClusterDynamics(Calculator):
         self._check_close(stat, types, step)
         forces = np.empty((n, 3)) if out is None else out
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
-        K.reduce_rows(lay["f_m3"], *red, forces)
+        if kick is None:
+            K.reduce_rows(lay["f_m3"], *red, forces, self._NO_V, 0.0)
+        else:
+            K.reduce_rows(lay["f_m3"], *red, forces, kick[0], float(kick[1]))
         res = {"forces": forces, "energy": float(stat[:, 0].sum()) if mode not in ("forces", "damped") else None}
         if mode in ("virial", "per_particle"):
             res["virial"] = vir.sum(axis=0)
         if per_particle:
             e = np.empty((n, 1))
-            K.reduce_rows(lay["e_m1"], *red, e)
+            K.reduce_rows(lay["e_m1"], *red, e, self._NO_V, 0.0)
             res["energies"] = e[:, 0]
             w = np.empty((n, 6))
-            K.reduce_rows(lay["w_m6"], *red, w)
+            K.reduce_rows(lay["w_m6"], *red, w, self._NO_V, 0.0)
             res["virials"] = w
         k = int(np.argmin(stat[:, 1]))
         self.last_stats = {"min_r_over_r0": math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
@@ -307,6 +323,37 @@ class ClusterDynamics(Calculator):
         return res
 
     _NO_ETA = np.zeros((0, 0))
+
+    def _advance(self, atoms, momenta, forces, invm, h, dt, damped):
+        """The dynamics' first half kick and drift fused with the next pair loop's gathers.
+
+        ``momenta += h forces; positions += dt momenta/m`` in the list's row
+        order (:func:`clusterdyn.neighbors.celllist.kick_drift_gather`), with the
+        sorted positions (and velocities if ``damped``) and the rebuild test's
+        displacements taken in the same pass; the next :meth:`compute` on these
+        positions uses them.  Returns (max v^2, its particle), or None when the
+        list is not ready for it (the caller then runs the separate passes).
+        """
+        nl = self.nl
+        pos = atoms.arrays["positions"]
+        n = len(atoms)
+        lay = self._buffers
+        if (nl is None or nl.perm_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
+                or lay is None or lay["n"] != n or self._setup_key is None or pos.dtype != np.float64
+                or not pos.flags.c_contiguous or not momenta.flags.c_contiguous
+                or not forces.flags.c_contiguous or momenta.dtype != np.float64
+                or forces.dtype != np.float64):
+            return None
+        lay = self._layout(n, False, damped)
+        nb = (n + STREAM_BLOCK - 1) // STREAM_BLOCK
+        if self._bstat is None or self._bstat.shape[0] != nb:
+            self._bstat = np.empty((nb, 9))
+        use_threads(n)
+        v2max, k, m2, h2 = kick_drift_gather(momenta, forces, pos, invm, h, dt, nl.perm_n, nl.offs_nc,
+                                             nl.ref_nc, lay["xs"], lay["vs"] if damped else self._NO_V,
+                                             self._bstat)
+        self._advanced = (id(pos), nl.nbuilds, m2, h2, damped, self._setup_key)
+        return v2max, k
 
     def _types(self, atoms, key):
         """Material ids (checked); for one material checked once per list build or new array."""

@@ -145,6 +145,7 @@ class DampedVerlet(MolecularDynamics):
                          **kwargs)
         self.check_interval = int(check_interval)
         self.forces = None
+        self._own_forces = False
         self._epot = None
         self._eta = calc.damping_matrix(J) if J is not None else None
         self._v2 = None
@@ -164,7 +165,9 @@ class DampedVerlet(MolecularDynamics):
             raise InputError("masses", m[m <= 0][:3].tolist(), "positive masses")
         return 1.0 / m
 
-    def _compute_forces(self):
+    def _compute_forces(self, kick=None):
+        """Forces at the current positions (constraints applied).  ``kick = h``: the
+        ClusterDynamics loop also adds ``h * forces`` to the momenta (fused second half kick)."""
         atoms = self.atoms
         t0 = time.perf_counter()
         if isinstance(self.calc, ClusterDynamics):
@@ -177,7 +180,8 @@ class DampedVerlet(MolecularDynamics):
                 self._fbuf = [np.empty((n, 3)), np.empty((n, 3))]
             self._fturn ^= 1
             out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn],
-                                    virial=False, energy=False)
+                                    virial=False, energy=False,
+                                    kick=None if kick is None else (atoms.arrays["momenta"], kick))
             forces = out["forces"]
             self.potential_energy = out["energy"]
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
@@ -187,6 +191,7 @@ class DampedVerlet(MolecularDynamics):
             self.potential_energy = atoms.get_potential_energy()
         for c in atoms.constraints:
             c.adjust_forces(atoms, forces)
+        self._own_forces = True
         self.timings["forces"] += time.perf_counter() - t0
         return forces
 
@@ -249,29 +254,45 @@ class DampedVerlet(MolecularDynamics):
         if self.forces is None or forces is not None:
             self._invm_n = self._invm()
             self.forces = self._compute_forces() if forces is None else forces
+            self._own_forces = forces is None
         invm = self._invm_n
         t0 = time.perf_counter()
         use_threads(len(atoms))
         p = atoms.arrays["momenta"]
         h = 0.5 * self.dt
-        I.kick(p, self.forces, h)
-        for c in atoms.constraints:
-            c.adjust_momenta(atoms, p)
-        if self._v2 is None or len(self._v2) != len(atoms):
-            self._v2 = np.empty(len(atoms))
-        if atoms.constraints and not all(isinstance(c, Piston) for c in atoms.constraints):
-            new = atoms.positions + self.dt * p * invm[:, None]
-            atoms.set_positions(new)
-            v2 = (p * p).sum(axis=1) * invm ** 2
-            k = int(np.argmax(v2))
-            v2max = v2[k]
+        # Pistons and walls only (or no constraints) with the CD calculator: the kicks and the
+        # drift run inside the calculator's streaming passes.  A piston's momenta are fixed and
+        # its forces were zeroed by adjust_forces, so setting them before the kick is the same.
+        fused = (self._own_forces and isinstance(self.calc, ClusterDynamics)
+                 and all(isinstance(c, Piston) for c in atoms.constraints))
+        res = None
+        if fused:
+            for c in atoms.constraints:
+                c.adjust_momenta(atoms, p)
+            res = self.calc._advance(atoms, p, self.forces, invm, h, self.dt, self._eta is not None)
+            fused = res is not None
+        if fused:
+            v2max, k = res
         else:
-            v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt, self._v2)
+            I.kick(p, self.forces, h)
+            for c in atoms.constraints:
+                c.adjust_momenta(atoms, p)
+            if self._v2 is None or len(self._v2) != len(atoms):
+                self._v2 = np.empty(len(atoms))
+            if atoms.constraints and not all(isinstance(c, Piston) for c in atoms.constraints):
+                new = atoms.positions + self.dt * p * invm[:, None]
+                atoms.set_positions(new)
+                v2 = (p * p).sum(axis=1) * invm ** 2
+                k = int(np.argmax(v2))
+                v2max = v2[k]
+            else:
+                v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt, self._v2)
         self._check_speed(v2max, k)
         self.timings["integrate"] += time.perf_counter() - t0
-        self.forces = self._compute_forces()
+        self.forces = self._compute_forces(kick=h if fused else None)
         t0 = time.perf_counter()
-        I.kick(p, self.forces, h)
+        if not fused:
+            I.kick(p, self.forces, h)
         for c in atoms.constraints:
             c.adjust_momenta(atoms, p)
         self.timings["integrate"] += time.perf_counter() - t0

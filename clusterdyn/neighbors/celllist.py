@@ -292,11 +292,12 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, 
                     dx = xs_nc[j, 0] - xi
                     dy = xs_nc[j, 1] - yi
                     dz = xs_nc[j, 2] - zi
-                    if dx * dx + dy * dy + dz * dz < rcut2:
-                        if cnt < cap:
-                            nbr_nk[i, cnt] = j
-                            img_nk[i, cnt] = code
-                        cnt += 1
+                    # branch-free: every candidate is written at the next free slot,
+                    # which only a hit keeps (a hit or miss is a coin toss here)
+                    if cnt < cap:
+                        nbr_nk[i, cnt] = j
+                        img_nk[i, cnt] = code
+                    cnt += 1 if dx * dx + dy * dy + dz * dz < rcut2 else 0
                 cnt_n[i] = cnt
     m = 0
     for i in range(cnt_n.shape[0]):
@@ -337,6 +338,109 @@ def gather_velocities(p_nc, invm_n, perm, vs_nc):
             vs_nc[k, 0] = p_nc[i, 0] * w
             vs_nc[k, 1] = p_nc[i, 1] * w
             vs_nc[k, 2] = p_nc[i, 2] * w
+
+
+@njit(cache=True, parallel=True)
+def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs_nc, vs_nc, bstat_b9):
+    """The first half of a velocity-Verlet step fused with the pair loop's gathers, in row order.
+
+    For sorted row k, particle i = perm[k]: ``p[i] += h f[i]``, ``x[i] += dt p[i]/m[i]``,
+    then ``xs[k] = x[i] + offs[k]`` (as :func:`gather_positions`) and, when
+    ``vs_nc`` has rows, ``vs[k] = p[i]/m[i]`` (as :func:`gather_velocities`).  The
+    arithmetic per particle is that of the separate kick, drift and gathers, so
+    the results are the same bit for bit.  Returns (max v^2, its particle,
+    ``max |x - ref|^2``, squared half-diagonal of the displacements' bounding box):
+    the speed check and the list's rebuild test (:meth:`NeighborList.update`
+    with ``displacement=``) without another pass.  Maxima are over fixed blocks
+    in block order (independent of the thread count); a NaN speed or
+    displacement comes back as the maximum (inf for the displacement).
+    """
+    n = perm.shape[0]
+    nb = (n + BLOCK - 1) // BLOCK
+    damp = vs_nc.shape[0] > 0
+    for b in prange(nb):
+        m = -1.0
+        kk = -1
+        md = 0.0
+        lx = 1e300
+        ly = 1e300
+        lz = 1e300
+        hx = -1e300
+        hy = -1e300
+        hz = -1e300
+        for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            i = perm[k]
+            p_nc[i, 0] += h * f_nc[i, 0]
+            p_nc[i, 1] += h * f_nc[i, 1]
+            p_nc[i, 2] += h * f_nc[i, 2]
+            w = invm_n[i]
+            vx = p_nc[i, 0] * w
+            vy = p_nc[i, 1] * w
+            vz = p_nc[i, 2] * w
+            x = x_nc[i, 0] + dt * vx
+            y = x_nc[i, 1] + dt * vy
+            z = x_nc[i, 2] + dt * vz
+            x_nc[i, 0] = x
+            x_nc[i, 1] = y
+            x_nc[i, 2] = z
+            xs_nc[k, 0] = x + offs_nc[k, 0]
+            xs_nc[k, 1] = y + offs_nc[k, 1]
+            xs_nc[k, 2] = z + offs_nc[k, 2]
+            if damp:
+                vs_nc[k, 0] = vx
+                vs_nc[k, 1] = vy
+                vs_nc[k, 2] = vz
+            v2 = vx * vx + vy * vy + vz * vz
+            if not v2 <= m:  # also takes NaN
+                if not (m != m):
+                    m = v2
+                    kk = i
+            dx = x - ref_nc[i, 0]
+            dy = y - ref_nc[i, 1]
+            dz = z - ref_nc[i, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            if r2 != r2:
+                md = np.inf
+            md = max(md, r2)
+            lx = min(lx, dx)
+            hx = max(hx, dx)
+            ly = min(ly, dy)
+            hy = max(hy, dy)
+            lz = min(lz, dz)
+            hz = max(hz, dz)
+        bstat_b9[b, 0] = m
+        bstat_b9[b, 1] = kk
+        bstat_b9[b, 2] = md
+        bstat_b9[b, 3] = lx
+        bstat_b9[b, 4] = ly
+        bstat_b9[b, 5] = lz
+        bstat_b9[b, 6] = hx
+        bstat_b9[b, 7] = hy
+        bstat_b9[b, 8] = hz
+    if n == 0:
+        return 0.0, -1, 0.0, 0.0
+    m = bstat_b9[0, 0]
+    kk = int(bstat_b9[0, 1])
+    for b in range(1, nb):
+        if m != m:
+            break
+        if not bstat_b9[b, 0] <= m:
+            m = bstat_b9[b, 0]
+            kk = int(bstat_b9[b, 1])
+    md = 0.0
+    lo = np.full(3, 1e300)
+    hi = np.full(3, -1e300)
+    for b in range(nb):
+        md = max(md, bstat_b9[b, 2])
+        for d in range(3):
+            lo[d] = min(lo[d], bstat_b9[b, 3 + d])
+            hi[d] = max(hi[d], bstat_b9[b, 6 + d])
+    h2 = 0.0
+    for d in range(3):
+        h2 += 0.25 * (hi[d] - lo[d]) ** 2
+    if md == np.inf:
+        h2 = np.inf
+    return m, kk, md, h2
 
 
 @njit(cache=True, parallel=True)
@@ -487,10 +591,16 @@ class NeighborList:
         self.perm_n = None
         self._key = None
         self._cap = 0
+        self._work = {}
         self._disp = np.zeros((DISP_BLOCKS, 7))
 
-    def update(self, positions, cell, pbc):
-        """Rebuild if needed; return True when rebuilt."""
+    def update(self, positions, cell, pbc, displacement=None):
+        """Rebuild if needed; return True when rebuilt.
+
+        ``displacement``: (``max |x - ref|^2``, squared half-diagonal) of the
+        current positions against :attr:`ref_nc`, when the caller already has
+        them (:func:`kick_drift_gather`); saves the check's own pass.
+        """
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         cell = np.asarray(cell, dtype=float).reshape(3, 3)
         pbc = np.asarray(pbc, dtype=bool)
@@ -499,17 +609,22 @@ class NeighborList:
         use_threads(pos.shape[0])
         key = _box_key(cell, pbc)
         if (self.ref_nc is None or self.ref_nc.shape != pos.shape or key != self._key
-                or (pos.shape[0] and self._moved(pos))):
+                or (pos.shape[0] and self._moved(pos, displacement))):
             self.build(pos, cell, pbc)
             return True
         return False
 
-    def _moved(self, pos):
+    def _moved(self, pos, displacement=None):
         lim = (0.5 * self.skin) ** 2
-        if not self.centered:
+        if displacement is not None:
+            m, h2 = displacement
+            if not self.centered:
+                return not m <= lim
+        elif not self.centered:
             m = _max_disp2(pos, self.ref_nc)
             return not m <= lim
-        m, h2 = _displacement(pos, self.ref_nc, self._disp)
+        else:
+            m, h2 = _displacement(pos, self.ref_nc, self._disp)
         return not (m <= lim or h2 <= lim)
 
     def _grid(self, pos, cell, pbc):
@@ -555,9 +670,20 @@ class NeighborList:
             self._build_sorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
         else:
             self._build_unsorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
-        self.ref_nc = pos.copy()
+        if self.ref_nc is not None and self.ref_nc.shape == pos.shape:
+            np.copyto(self.ref_nc, pos)
+        else:
+            self.ref_nc = pos.copy()
         self._key = _box_key(cell, pbc)
         self.nbuilds += 1
+
+    def _scratch(self, name, shape, dtype):
+        """A build's work array, kept between builds (fresh pages cost a page fault each)."""
+        a = self._work.get(name)
+        if a is None or a.shape != shape or a.dtype != dtype:
+            a = np.empty(shape, dtype)
+            self._work[name] = a
+        return a
 
     def _image_table(self, krange, box):
         kx, ky, kz = krange
@@ -592,8 +718,8 @@ class NeighborList:
         # contiguous block of rows touches few rows outside itself)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
         xs = np.empty((n, 3))
-        offs = np.empty((n, 3))
-        cell_s = np.empty(n, np.int64)
+        offs = self._scratch("offs", (n, 3), np.float64)
+        cell_s = self._scratch("cell", (n,), np.int64)
         perm, start = _sort_by_cell(wpos, pos, lo, 1.0 / cs, ncell, axes, xs, offs, cell_s)
         fast = self.half and np.all(krange == 1) and all(ncell[d] >= 3 for d in range(3) if periodic_c[d])
         if fast:
@@ -605,9 +731,9 @@ class NeighborList:
             slotmult = np.array([9, 3, 1], np.int64)[axes]
             cap = self._cap or 16
             while True:
-                nbr = np.empty((n, cap), np.int32)
-                img = np.empty((n, cap), np.int16)
-                cnt = np.empty(n, np.int64)
+                nbr = self._scratch("nbr", (n, cap), np.int32)
+                img = self._scratch("img", (n, cap), np.int16)
+                cnt = self._scratch("cnt", (n,), np.int64)
                 m = _fill_half_stencil(xs, start, nslot, periodic_s, HALF_STENCIL, slotbox,
                                        slotmult, rcut * rcut, cap, nbr, img, cnt)
                 if m <= cap:
@@ -620,7 +746,6 @@ class NeighborList:
             j_p = np.empty(npairs, np.int32)
             img_p = np.empty(npairs, np.int16)
             _compact(nbr, img, cnt, first_n, j_p, img_p)
-            del nbr, img
             self.image_sc = self._image_table(np.ones(3, np.int64), box)
         else:
             first_n = np.zeros(n + 1, np.int64)
