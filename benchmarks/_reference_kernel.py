@@ -1,6 +1,6 @@
 """A hand-written single-material CD pair loop with no damping code at all (benchmark reference).
 
-Same list, chunks, buffers and work (forces, the closest distance, the count of pairs
+Same list, chunks, buffers and work (forces, the closest pair, the count of pairs
 below the table; no energy) as ``clusterdyn.calculators._cd_kernels.cd_forces_1``; used by
 throughput.py to show that the library's undamped variant costs what a loop
 written without the damping term costs.
@@ -25,6 +25,8 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
             f_mc[r, 1] = 0.0
             f_mc[r, 2] = 0.0
         minr2 = 1e300
+        ci = -1
+        cj = -1
         nclose = 0
         for i in range(bounds_k[k], bounds_k[k + 1]):
             xi = xs_nc[i, 0]
@@ -35,9 +37,10 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
             fzi = 0.0
             for p in range(first_n[i], first_n[i + 1]):
                 j = j_p[p]
-                dx = xs_nc[j, 0] - xi
-                dy = xs_nc[j, 1] - yi
-                dz = xs_nc[j, 2] - zi
+                ju = np.uint64(j)
+                dx = xs_nc[ju, 0] - xi
+                dy = xs_nc[ju, 1] - yi
+                dz = xs_nc[ju, 2] - zi
                 s = img_p[p]
                 if s != zero_img:
                     dx += image_sc[s, 0]
@@ -48,6 +51,8 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
                     continue
                 if r2 < minr2:
                     minr2 = r2
+                    ci = i
+                    cj = j
                 if r2 < rmin2:
                     nclose += 1
                     continue
@@ -66,12 +71,15 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
                 fxi -= fx
                 fyi -= fy
                 fzi -= fz
-                f_mc[off + j, 0] += fx
-                f_mc[off + j, 1] += fy
-                f_mc[off + j, 2] += fz
+                rj = np.uint64(off + j)
+                f_mc[rj, 0] += fx
+                f_mc[rj, 1] += fy
+                f_mc[rj, 2] += fz
             f_mc[off + i, 0] += fxi
             f_mc[off + i, 1] += fyi
             f_mc[off + i, 2] += fzi
         stat_k[k, 0] = 0.0
         stat_k[k, 1] = minr2
+        stat_k[k, 2] = ci
+        stat_k[k, 3] = cj
         stat_k[k, 4] = nclose

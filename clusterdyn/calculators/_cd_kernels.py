@@ -223,9 +223,10 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
         fzi = 0.0
         for p in range(first_n[i], first_n[i + 1]):
             j = j_p[p]
-            dx = xs_nc[j, 0] - xi
-            dy = xs_nc[j, 1] - yi
-            dz = xs_nc[j, 2] - zi
+            ju = np.uint64(j)  # unsigned: no negative-index wraparound code per access
+            dx = xs_nc[ju, 0] - xi
+            dy = xs_nc[ju, 1] - yi
+            dz = xs_nc[ju, 2] - zi
             s = img_p[p]
             if s != zero_img:
                 dx += image_sc[s, 0]
@@ -233,7 +234,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 dz += image_sc[s, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if MULTI:
-                b = type_s[j]
+                b = type_s[ju]
                 cut2 = meta[a, b, 2]
             if not r2 < cut2:
                 continue
@@ -293,7 +294,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 vxy += hxy
                 if PP:
                     ri = off + i
-                    rj = off + j
+                    rj = np.uint64(off + j)
                     e_m1[ri, 0] += 0.5 * e
                     e_m1[rj, 0] += 0.5 * e
                     w_m6[ri, 0] += 0.5 * hxx
@@ -311,15 +312,16 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             if DAMP:
                 if MULTI:
                     eta = eta_tt[a, b]
-                fx += eta * (vxi - vs_nc[j, 0])
-                fy += eta * (vyi - vs_nc[j, 1])
-                fz += eta * (vzi - vs_nc[j, 2])
+                fx += eta * (vxi - vs_nc[ju, 0])
+                fy += eta * (vyi - vs_nc[ju, 1])
+                fz += eta * (vzi - vs_nc[ju, 2])
             fxi -= fx
             fyi -= fy
             fzi -= fz
-            f_mc[off + j, 0] += fx
-            f_mc[off + j, 1] += fy
-            f_mc[off + j, 2] += fz
+            rj = np.uint64(off + j)
+            f_mc[rj, 0] += fx
+            f_mc[rj, 1] += fy
+            f_mc[rj, 2] += fz
         f_mc[off + i, 0] += fxi
         f_mc[off + i, 1] += fyi
         f_mc[off + i, 2] += fzi
