@@ -139,7 +139,7 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
         q0 = cptr_k[k]
         q1 = cptr_k[k + 1]
         for i in range(bounds_k[k], bounds_k[k + 1]):
-            o = perm_n[i]
+            o = np.uint64(perm_n[i])
             if nc == 3:
                 sx = 0.0
                 sy = 0.0

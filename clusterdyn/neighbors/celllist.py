@@ -289,9 +289,10 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, 
                 if s == 0:
                     q0 = i + 1
                 for j in range(q0, b1):
-                    dx = xs_nc[j, 0] - xi
-                    dy = xs_nc[j, 1] - yi
-                    dz = xs_nc[j, 2] - zi
+                    ju = np.uint64(j)
+                    dx = xs_nc[ju, 0] - xi
+                    dy = xs_nc[ju, 1] - yi
+                    dz = xs_nc[ju, 2] - zi
                     # branch-free: every candidate is written at the next free slot,
                     # which only a hit keeps (a hit or miss is a coin toss here)
                     if cnt < cap:
@@ -321,7 +322,7 @@ def gather_positions(pos_nc, perm, offs_nc, xs_nc):
     n = perm.shape[0]
     for b in prange((n + BLOCK - 1) // BLOCK):
         for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
-            i = perm[k]
+            i = np.uint64(perm[k])
             xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
             xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
             xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
@@ -333,7 +334,7 @@ def gather_velocities(p_nc, invm_n, perm, vs_nc):
     n = perm.shape[0]
     for b in prange((n + BLOCK - 1) // BLOCK):
         for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
-            i = perm[k]
+            i = np.uint64(perm[k])
             w = invm_n[i]
             vs_nc[k, 0] = p_nc[i, 0] * w
             vs_nc[k, 1] = p_nc[i, 1] * w
@@ -369,7 +370,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
         hy = -1e300
         hz = -1e300
         for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
-            i = perm[k]
+            i = np.uint64(perm[k])
             p_nc[i, 0] += h * f_nc[i, 0]
             p_nc[i, 1] += h * f_nc[i, 1]
             p_nc[i, 2] += h * f_nc[i, 2]
@@ -394,7 +395,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
             if not v2 <= m:  # also takes NaN
                 if not (m != m):
                     m = v2
-                    kk = i
+                    kk = perm[k]
             dx = x - ref_nc[i, 0]
             dy = y - ref_nc[i, 1]
             dz = z - ref_nc[i, 2]
