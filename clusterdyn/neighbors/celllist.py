@@ -221,8 +221,33 @@ def _sort_by_cell(wpos_nc, pos_nc, lo_c, inv_cs_c, ncell_c, axes, xs_nc, offs_nc
     return perm, start
 
 
+@njit(inline="always")
+def _scan(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, code, rcut2, cap, nbr_nk, img_nk, cnt_n):
+    """Partners of rows a0..a1 among rows b0..b1 (shifted by -s); ``own``: only j > i."""
+    for i in range(a0, a1):
+        xi = xs_nc[i, 0] - sx
+        yi = xs_nc[i, 1] - sy
+        zi = xs_nc[i, 2] - sz
+        cnt = cnt_n[i]
+        q0 = b0
+        if own:
+            q0 = i + 1
+        for j in range(q0, b1):
+            ju = np.uint64(j)
+            dx = xs_nc[ju, 0] - xi
+            dy = xs_nc[ju, 1] - yi
+            dz = xs_nc[ju, 2] - zi
+            # branch-free: every candidate is written at the next free slot,
+            # which only a hit keeps (a hit or miss is a coin toss here)
+            if cnt < cap:
+                nbr_nk[i, cnt] = j
+                img_nk[i, cnt] = code
+            cnt += 1 if dx * dx + dy * dy + dz * dz < rcut2 else 0
+        cnt_n[i] = cnt
+
+
 @njit(cache=True, parallel=True)
-def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, slotmult_s,
+def _fill_half_stencil(xs_nc, start, nslot, periodic_s, runs_r4, slotbox_s3, slotmult_s,
                        rcut2, cap, nbr_nk, img_nk, cnt_n):
     """Half list over sorted particles in one pass: own cell (j > i) + 13 forward cells.
 
@@ -230,15 +255,17 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, 
     the cell counts and periodicity per slot, ``slotbox_s3`` the Cartesian box
     vector of each slot's axis and ``slotmult_s`` its weight in the 3x3x3 image
     code.  Valid when every periodic slot has >= 3 cells of size >= the cut-off.
-    The loop runs over cell pairs (the stencil set-up is paid once per cell, not
-    per particle); row i gets its partners in stencil order in
-    ``nbr_nk[i, :cnt_n[i]]``.  cnt_n may exceed cap (the maximum is returned),
-    then the caller retries with a larger cap.
+    The forward stencil is walked as runs of cells along the fastest slot
+    (``runs_r4`` = d0, d1, first and last d2; :data:`HALF_RUNS`): cells of a
+    run are consecutive rows, so a run is one scan unless it wraps a periodic
+    face.  Row i gets its partners in stencil order in ``nbr_nk[i, :cnt_n[i]]``.
+    cnt_n may exceed cap (the maximum is returned), then the caller retries
+    with a larger cap.
     """
     m0 = nslot[0]
     m1 = nslot[1]
     m2 = nslot[2]
-    ns = stencil_s3.shape[0]
+    nr = runs_r4.shape[0]
     for c in prange(m0 * m1 * m2):
         a0 = start[c]
         a1 = start[c + 1]
@@ -249,13 +276,11 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, 
         g2 = c % m2
         g1 = (c // m2) % m1
         g0 = c // (m2 * m1)
-        for s in range(ns):
-            h0 = g0 + stencil_s3[s, 0]
-            h1 = g1 + stencil_s3[s, 1]
-            h2 = g2 + stencil_s3[s, 2]
+        for r in range(nr):
+            h0 = g0 + runs_r4[r, 0]
+            h1 = g1 + runs_r4[r, 1]
             i0 = 0
             i1 = 0
-            i2 = 0
             if h0 < 0 or h0 >= m0:
                 if not periodic_s[0]:
                     continue
@@ -266,40 +291,44 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, stencil_s3, slotbox_s3, 
                     continue
                 i1 = -1 if h1 < 0 else 1
                 h1 -= i1 * m1
-            if h2 < 0 or h2 >= m2:
-                if not periodic_s[2]:
+            base = (h0 * m1 + h1) * m2
+            # segments of consecutive cells with one image along the fastest slot
+            seg_lo = -1
+            seg_hi = -1
+            seg_i2 = 0
+            for d2 in range(runs_r4[r, 2], runs_r4[r, 3] + 2):
+                last = d2 == runs_r4[r, 3] + 1
+                h2 = 0
+                i2 = 0
+                ok = False
+                if not last:
+                    h2 = g2 + d2
+                    ok = True
+                    if h2 < 0 or h2 >= m2:
+                        if periodic_s[2]:
+                            i2 = -1 if h2 < 0 else 1
+                            h2 -= i2 * m2
+                        else:
+                            ok = False
+                if ok and seg_lo >= 0 and i2 == seg_i2 and h2 == seg_hi + 1:
+                    seg_hi = h2
                     continue
-                i2 = -1 if h2 < 0 else 1
-                h2 -= i2 * m2
-            cc = (h0 * m1 + h1) * m2 + h2
-            b0 = start[cc]
-            b1 = start[cc + 1]
-            if b1 == b0:
-                continue
-            sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + i2 * slotbox_s3[2, 0]
-            sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + i2 * slotbox_s3[2, 1]
-            sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + i2 * slotbox_s3[2, 2]
-            code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + i2 * slotmult_s[2]
-            for i in range(a0, a1):
-                xi = xs_nc[i, 0] - sx
-                yi = xs_nc[i, 1] - sy
-                zi = xs_nc[i, 2] - sz
-                cnt = cnt_n[i]
-                q0 = b0
-                if s == 0:
-                    q0 = i + 1
-                for j in range(q0, b1):
-                    ju = np.uint64(j)
-                    dx = xs_nc[ju, 0] - xi
-                    dy = xs_nc[ju, 1] - yi
-                    dz = xs_nc[ju, 2] - zi
-                    # branch-free: every candidate is written at the next free slot,
-                    # which only a hit keeps (a hit or miss is a coin toss here)
-                    if cnt < cap:
-                        nbr_nk[i, cnt] = j
-                        img_nk[i, cnt] = code
-                    cnt += 1 if dx * dx + dy * dy + dz * dz < rcut2 else 0
-                cnt_n[i] = cnt
+                if seg_lo >= 0:
+                    b0 = start[base + seg_lo]
+                    b1 = start[base + seg_hi + 1]
+                    if b1 > b0:
+                        own = r == 0 and base + seg_lo == c
+                        sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + seg_i2 * slotbox_s3[2, 0]
+                        sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + seg_i2 * slotbox_s3[2, 1]
+                        sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + seg_i2 * slotbox_s3[2, 2]
+                        code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + seg_i2 * slotmult_s[2]
+                        _scan(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, code, rcut2, cap, nbr_nk, img_nk,
+                              cnt_n)
+                seg_lo = -1
+                if ok:
+                    seg_lo = h2
+                    seg_hi = h2
+                    seg_i2 = i2
     m = 0
     for i in range(cnt_n.shape[0]):
         m = max(m, cnt_n[i])
@@ -532,6 +561,10 @@ def check_cell(cell, pbc):
 #: forward half of the 3x3x3 cell stencil (own cell first), in slot order
 HALF_STENCIL = np.array([[0, 0, 0]] + [[a, b, c] for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
                                        if (a, b, c) > (0, 0, 0)], dtype=np.int64)
+#: the same stencil as runs along the fastest slot: (d0, d1, first d2, last d2); the first run
+#: starts at the own cell (partners j > i there)
+HALF_RUNS = np.array([[0, 0, 0, 1], [0, 1, -1, 1], [1, -1, -1, 1], [1, 0, -1, 1], [1, 1, -1, 1]],
+                     dtype=np.int64)
 
 
 class NeighborList:
@@ -735,7 +768,7 @@ class NeighborList:
                 nbr = self._scratch("nbr", (n, cap), np.int32)
                 img = self._scratch("img", (n, cap), np.int16)
                 cnt = self._scratch("cnt", (n,), np.int64)
-                m = _fill_half_stencil(xs, start, nslot, periodic_s, HALF_STENCIL, slotbox,
+                m = _fill_half_stencil(xs, start, nslot, periodic_s, HALF_RUNS, slotbox,
                                        slotmult, rcut * rcut, cap, nbr, img, cnt)
                 if m <= cap:
                     break
