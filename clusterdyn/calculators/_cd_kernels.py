@@ -24,6 +24,9 @@ variant; LLVM removes the code of every term a variant does not use.
 - ``ENERGY``: the pair energy (the dynamics' steps leave it out, about a
   tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it only
   when it is read).
+- ``TRACK``: the rows of the closest pair (the single-material steps keep
+  only its distance; :func:`closest_pair` finds the pair when it is asked
+  for, which with one material is only to name it in an error).
 
 The periodic image shift is added only to pairs that cross a periodic face
 (image code other than the middle of ``image_sc``).
@@ -40,7 +43,7 @@ order) only repels: zero force beyond r0_ab and energy ``E(r) - E(r0_ab)``
 inside, so it stays conservative.
 
 Outputs per chunk: ``stat_k[k]`` = (energy, smallest r^2/r0_ab^2, its row i,
-its row j, number of pairs closer than the table), ``vir_k6[k]`` = pair
+its row j (-1 when not tracked), number of pairs closer than the table), ``vir_k6[k]`` = pair
 virial (xx yy zz yz xz xy), eV.
 """
 
@@ -172,7 +175,7 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
 @njit(inline="always")
 def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
            f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-           MULTI, DAMP, VIR, PP, INIT, ENERGY):
+           MULTI, DAMP, VIR, PP, INIT, ENERGY, TRACK):
     """The pair loop of chunk k (see the module docstring for the flags)."""
     off = boff_k[k] - span_k2[k, 0]
     zero_img = image_sc.shape[0] // 2
@@ -241,10 +244,13 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             r2n = r2
             if MULTI:
                 r2n = r2 * meta[a, b, 4]
-            if r2n < minr2:
-                minr2 = r2n
-                ci = i
-                cj = j
+            if TRACK:
+                if r2n < minr2:
+                    minr2 = r2n
+                    ci = i
+                    cj = j
+            else:
+                minr2 = min(minr2, r2n)
             if MULTI:
                 rmin2 = meta[a, b, 3]
             if r2 < rmin2:
@@ -340,6 +346,48 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
     vir_k6[k, 5] = vxy
 
 
+@njit(cache=True)
+def closest_pair(xs_nc, type_s, first_n, j_p, img_p, image_sc, meta, multi):
+    """Rows (i, j) of the first pair, in row and list order, at the smallest r^2/r0_ab^2
+    among the pairs within the cutoff: the pair a tracking kernel reports, by the same
+    arithmetic.  (-1, -1) when no pair is within the cutoff."""
+    zero_img = image_sc.shape[0] // 2
+    minr2 = 1e300
+    ci = -1
+    cj = -1
+    a = 0
+    b = 0
+    for i in range(first_n.shape[0] - 1):
+        if multi:
+            a = type_s[i]
+        xi = xs_nc[i, 0]
+        yi = xs_nc[i, 1]
+        zi = xs_nc[i, 2]
+        for p in range(first_n[i], first_n[i + 1]):
+            j = j_p[p]
+            dx = xs_nc[j, 0] - xi
+            dy = xs_nc[j, 1] - yi
+            dz = xs_nc[j, 2] - zi
+            s = img_p[p]
+            if s != zero_img:
+                dx += image_sc[s, 0]
+                dy += image_sc[s, 1]
+                dz += image_sc[s, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            if multi:
+                b = type_s[j]
+            if not r2 < meta[a, b, 2]:
+                continue
+            r2n = r2
+            if multi:
+                r2n = r2 * meta[a, b, 4]
+            if r2n < minr2:
+                minr2 = r2n
+                ci = i
+                cj = j
+    return ci, cj
+
+
 # -- the variants (arguments: see _chunk; ``initial_only`` is read by the multi kernels only) ----
 
 @njit(cache=True, parallel=True)
@@ -349,7 +397,7 @@ def cd_forces_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, False, False, False, False)
+               False, False, False, False, False, False, False)
 
 
 @njit(cache=True, parallel=True)
@@ -360,7 +408,7 @@ def cd_forces_virial_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta,
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, False, False, True)
+               False, False, True, False, False, True, True)
 
 
 @njit(cache=True, parallel=True)
@@ -371,7 +419,7 @@ def cd_forces_damped_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta,
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, True, False, False, False, False)
+               False, True, False, False, False, False, False)
 
 
 @njit(cache=True, parallel=True)
@@ -382,7 +430,7 @@ def cd_forces_per_particle_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef,
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, True, False, True)
+               False, False, True, True, False, True, True)
 
 
 @njit(cache=True, parallel=True)
@@ -392,7 +440,7 @@ def cd_forces_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bo
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, False, initial_only, True)
+               True, False, True, False, initial_only, True, True)
 
 
 @njit(cache=True, parallel=True)
@@ -402,7 +450,7 @@ def cd_forces_only_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, met
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, False, False, initial_only, False)
+               True, False, False, False, initial_only, False, True)
 
 
 @njit(cache=True, parallel=True)
@@ -413,7 +461,7 @@ def cd_forces_damped_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, m
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, True, False, False, initial_only, False)
+               True, True, False, False, initial_only, False, True)
 
 
 @njit(cache=True, parallel=True)
@@ -424,7 +472,7 @@ def cd_forces_per_particle_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, c
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, True, initial_only, True)
+               True, False, True, True, initial_only, True, True)
 
 
 #: kernel by (multi, mode), mode in "forces", "virial", "damped", "per_particle"

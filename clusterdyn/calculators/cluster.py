@@ -68,6 +68,31 @@ def default_skin(rc):
     return float(min(0.25, max(0.05, 1.40 - rc)))
 
 
+class _Stats(dict):
+    """``last_stats`` of a :meth:`ClusterDynamics.compute`.  ``"closest"`` (the caller's rows of
+    the closest pair) comes from the loop when it tracks it, else it is found when first read
+    (:func:`_cd_kernels.closest_pair`, one pass); it can be read until the next compute
+    or step."""
+
+    def __init__(self, calc, **kw):
+        super().__init__(**kw)
+        self._calc = calc
+        self._token = calc._ncompute
+        self._args = None
+
+    def __missing__(self, key):
+        if key != "closest" or self._args is None:
+            raise KeyError(key)
+        if self._calc._ncompute != self._token:
+            raise KeyError("closest: read it before the next compute")
+        *args, perm = self._args
+        i, j = K.closest_pair(*args)
+        v = (int(perm[i]), int(perm[j])) if i >= 0 else (-1, -1)
+        self[key] = v
+        self._args = None
+        return v
+
+
 class ClusterDynamics(Calculator):
     """Cluster Dynamics forces (CD eq. 1-2) as an ASE calculator.
 
@@ -120,6 +145,7 @@ class ClusterDynamics(Calculator):
         self.potentials = None
         self.last_stats = None
         self._buffers = None
+        self._ncompute = 0
         self._advanced = None
         self._bstat = None
         self._types_key = None
@@ -188,6 +214,7 @@ class ClusterDynamics(Calculator):
         self.masses_t = np.array([p.mass for p in self.potentials])
         self._setup_key = key
         self._buffers = None
+        self._ncompute = 0
         self._advanced = None
         self._bstat = None
         self._types_key = None
@@ -297,6 +324,15 @@ class ClusterDynamics(Calculator):
             for k in range(stat.shape[0]):
                 if stat[k, c] >= 0:
                     stat[k, c] = perm[int(stat[k, c])]
+        self._ncompute += 1
+        k = int(np.argmin(stat[:, 1]))
+        stats = _Stats(self, min_r_over_r0=math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
+                       npairs=nl.npairs, nbuilds=nl.nbuilds)
+        if stat[k, 2] >= 0:
+            stats["closest"] = (int(stat[k, 2]), int(stat[k, 3]))
+        else:
+            stats._args = (xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.meta, multi, perm)
+        self.last_stats = stats
         self._check_close(stat, types, step)
         forces = np.empty((n, 3)) if out is None else out
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
@@ -314,10 +350,6 @@ class ClusterDynamics(Calculator):
             w = np.empty((n, 6))
             K.reduce_rows(lay["w_m6"], *red, w, self._NO_V, 0.0)
             res["virials"] = w
-        k = int(np.argmin(stat[:, 1]))
-        self.last_stats = {"min_r_over_r0": math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
-                           "closest": (int(stat[k, 2]), int(stat[k, 3])), "npairs": nl.npairs,
-                           "nbuilds": nl.nbuilds}
         if mode == "damped" and energy:
             res["energy"] = self.compute(atoms, step=step, virial=False)["energy"]
         return res
@@ -349,6 +381,7 @@ class ClusterDynamics(Calculator):
         if self._bstat is None or self._bstat.shape[0] != nb:
             self._bstat = np.empty((nb, 9))
         use_threads(n)
+        self._ncompute += 1  # the sorted positions change: last_stats' lazy "closest" expires
         v2max, k, m2, h2 = kick_drift_gather(momenta, forces, pos, invm, h, dt, nl.perm_n, nl.offs_nc,
                                              nl.ref_nc, lay["xs"], lay["vs"] if damped else self._NO_V,
                                              self._bstat)
@@ -385,7 +418,7 @@ class ClusterDynamics(Calculator):
         nclose = stat[:, 4].sum()
         if nclose > 0:
             k = int(np.argmin(stat[:, 1]))
-            i, j = int(stat[k, 2]), int(stat[k, 3])
+            i, j = self.last_stats["closest"]
             a, b = types[i], types[j]
             r0ab = 1.0 / math.sqrt(self.meta[a, b, 4])
             r = math.sqrt(stat[k, 1]) * r0ab

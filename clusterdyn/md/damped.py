@@ -230,9 +230,12 @@ class DampedVerlet(MolecularDynamics):
         x = st["min_r_over_r0"]
         if x >= 1.0 or not math.isfinite(x):
             return
-        i, j = st["closest"]
         mid = self.atoms.arrays.get("material")
-        a, b = (0, 0) if mid is None else (int(mid[i]), int(mid[j]))
+        if mid is None or len(self.calc.potentials) == 1:
+            a, b = 0, 0  # one pair law: the closest pair is named only if the check fails
+        else:
+            i, j = st["closest"]
+            a, b = int(mid[i]), int(mid[j])
         r = x * self.calc.law(a, b).r0
         if r > self._safe_distance(a, b):
             return

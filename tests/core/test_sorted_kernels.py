@@ -105,3 +105,27 @@ def test_sorted_kernels_match_a_direct_pair_sum():
     np.add.at(En, j, 0.5 * e)
     assert np.allclose(out["energies"], En, rtol=1e-10, atol=1e-12 * np.abs(En).max())
     assert np.allclose(out["virials"].sum(axis=0), out["virial"], rtol=1e-10)
+
+
+def test_closest_pair_found_when_read_is_the_tracked_one():
+    """The single-material step kernels keep only the smallest distance; the pair itself is
+    found on demand and is the one the tracking kernels report; it expires with the next step."""
+    from clusterdyn import units
+    from clusterdyn.scenes.shock import build_shock
+    s = build_shock(size=(24, 3, 3), u=3 * units.km_s, J=None)
+    s.dyn.run(50)
+    c, a = s.calc, s.atoms
+    c.compute(a, virial=False, energy=False)
+    st = c.last_stats
+    assert st._args is not None                       # not tracked by this kernel
+    lazy, x_lazy = st["closest"], st["min_r_over_r0"]
+    c.compute(a)                                       # the virial kernel tracks the pair
+    assert c.last_stats._args is None
+    assert c.last_stats["closest"] == lazy and c.last_stats["min_r_over_r0"] == x_lazy < 1.0
+    i, j = lazy
+    assert a.get_distance(i, j, mic=True) / c.potentials[0].r0 == pytest.approx(x_lazy, rel=1e-12)
+    c.compute(a, virial=False, energy=False)
+    old = c.last_stats
+    s.dyn.run(1)
+    with pytest.raises(KeyError, match="before the next compute"):
+        old["closest"]
