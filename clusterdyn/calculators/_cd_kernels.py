@@ -25,8 +25,8 @@ variant; LLVM removes the code of every term a variant does not use.
   tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it only
   when it is read).
 - ``TRACK``: the rows of the closest pair (the single-material steps keep
-  only its distance; :func:`closest_pair` finds the pair when it is asked
-  for, which with one material is only to name it in an error).
+  only its distance; the calculator reruns a tracking variant when the pair
+  is asked for, which with one material is only to name it in an error).
 
 The periodic image shift is added only to pairs that cross a periodic face
 (image code other than the middle of ``image_sc``).
@@ -344,48 +344,6 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
     vir_k6[k, 3] = vyz
     vir_k6[k, 4] = vxz
     vir_k6[k, 5] = vxy
-
-
-@njit(cache=True)
-def closest_pair(xs_nc, type_s, first_n, j_p, img_p, image_sc, meta, multi):
-    """Rows (i, j) of the first pair, in row and list order, at the smallest r^2/r0_ab^2
-    among the pairs within the cutoff: the pair a tracking kernel reports, by the same
-    arithmetic.  (-1, -1) when no pair is within the cutoff."""
-    zero_img = image_sc.shape[0] // 2
-    minr2 = 1e300
-    ci = -1
-    cj = -1
-    a = 0
-    b = 0
-    for i in range(first_n.shape[0] - 1):
-        if multi:
-            a = type_s[i]
-        xi = xs_nc[i, 0]
-        yi = xs_nc[i, 1]
-        zi = xs_nc[i, 2]
-        for p in range(first_n[i], first_n[i + 1]):
-            j = j_p[p]
-            dx = xs_nc[j, 0] - xi
-            dy = xs_nc[j, 1] - yi
-            dz = xs_nc[j, 2] - zi
-            s = img_p[p]
-            if s != zero_img:
-                dx += image_sc[s, 0]
-                dy += image_sc[s, 1]
-                dz += image_sc[s, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            if multi:
-                b = type_s[j]
-            if not r2 < meta[a, b, 2]:
-                continue
-            r2n = r2
-            if multi:
-                r2n = r2 * meta[a, b, 4]
-            if r2n < minr2:
-                minr2 = r2n
-                ci = i
-                cj = j
-    return ci, cj
 
 
 # -- the variants (arguments: see _chunk; ``initial_only`` is read by the multi kernels only) ----

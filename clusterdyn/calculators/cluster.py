@@ -71,8 +71,8 @@ def default_skin(rc):
 class _Stats(dict):
     """``last_stats`` of a :meth:`ClusterDynamics.compute`.  ``"closest"`` (the caller's rows of
     the closest pair) comes from the loop when it tracks it, else it is found when first read
-    (:func:`_cd_kernels.closest_pair`, one pass); it can be read until the next compute
-    or step."""
+    by a rerun of the loop's tracking variant (its buffers are scratch by then); it can be
+    read until the next compute or step."""
 
     def __init__(self, calc, **kw):
         super().__init__(**kw)
@@ -85,9 +85,11 @@ class _Stats(dict):
             raise KeyError(key)
         if self._calc._ncompute != self._token:
             raise KeyError("closest: read it before the next compute")
-        *args, perm = self._args
-        i, j = K.closest_pair(*args)
-        v = (int(perm[i]), int(perm[j])) if i >= 0 else (-1, -1)
+        kernel, args = self._args
+        kernel(*args)
+        stat = args[12]
+        k = int(np.argmin(stat[:, 1]))
+        v = (int(args[18][int(stat[k, 2])]), int(args[18][int(stat[k, 3])])) if stat[k, 2] >= 0 else (-1, -1)
         self[key] = v
         self._args = None
         return v
@@ -317,9 +319,10 @@ class ClusterDynamics(Calculator):
         else:
             mode = "forces"
         stat, vir = lay["stat_k"], lay["vir_k6"]
-        K.KERNELS[multi, mode](xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta,
-                               lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta,
-                               lay["e_m1"], lay["w_m6"], perm, bonds, ids, initial)
+        args = (xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, lay["bounds"],
+                lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"], perm,
+                bonds, ids, initial)
+        K.KERNELS[multi, mode](*args)
         for c in (2, 3):
             for k in range(stat.shape[0]):
                 if stat[k, c] >= 0:
@@ -331,7 +334,7 @@ class ClusterDynamics(Calculator):
         if stat[k, 2] >= 0:
             stats["closest"] = (int(stat[k, 2]), int(stat[k, 3]))
         else:
-            stats._args = (xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.meta, multi, perm)
+            stats._args = (K.KERNELS[multi, "virial"], args[:14] + (self._NO_V, self._NO_ETA) + args[16:])
         self.last_stats = stats
         self._check_close(stat, types, step)
         forces = np.empty((n, 3)) if out is None else out
@@ -418,10 +421,11 @@ class ClusterDynamics(Calculator):
         nclose = stat[:, 4].sum()
         if nclose > 0:
             k = int(np.argmin(stat[:, 1]))
-            i, j = self.last_stats["closest"]
+            x2 = stat[k, 1]
+            i, j = self.last_stats["closest"]  # may rerun the loop into the same buffers
             a, b = types[i], types[j]
             r0ab = 1.0 / math.sqrt(self.meta[a, b, 4])
-            r = math.sqrt(stat[k, 1]) * r0ab
+            r = math.sqrt(x2) * r0ab
             raise InstabilityError(
                 f"{int(nclose)} pair(s) closer than the potential's tabulated range "
                 f"(r_min = {math.sqrt(self.meta[a, b, 3]) / r0ab:.2f} r0); the time step is too large for this "

@@ -370,6 +370,41 @@ def gather_velocities(p_nc, invm_n, perm, vs_nc):
             vs_nc[k, 2] = p_nc[i, 2] * w
 
 
+#: start of a block's displacement bounds: (max |d|^2, min dx, dy, dz, max dx, dy, dz)
+@njit(inline="always")
+def _disp_start():
+    return (0.0, 1e300, 1e300, 1e300, -1e300, -1e300, -1e300)
+
+
+@njit(inline="always")
+def _disp_add(acc, dx, dy, dz):
+    """The bounds ``acc`` with one more displacement (a NaN makes the max inf)."""
+    m, lx, ly, lz, hx, hy, hz = acc
+    r2 = dx * dx + dy * dy + dz * dz
+    if r2 != r2:
+        m = np.inf
+    return (max(m, r2), min(lx, dx), min(ly, dy), min(lz, dz), max(hx, dx), max(hy, dy), max(hz, dz))
+
+
+@njit(inline="always")
+def _disp_result(rows_b7):
+    """(max |d|^2, squared half-diagonal of the bounding box) over blocks, in block order."""
+    m = 0.0
+    lo = np.full(3, 1e300)
+    hi = np.full(3, -1e300)
+    for t in range(rows_b7.shape[0]):
+        m = max(m, rows_b7[t, 0])
+        for d in range(3):
+            lo[d] = min(lo[d], rows_b7[t, 1 + d])
+            hi[d] = max(hi[d], rows_b7[t, 4 + d])
+    h2 = 0.0
+    for d in range(3):
+        h2 += 0.25 * (hi[d] - lo[d]) ** 2
+    if m == np.inf:
+        h2 = np.inf
+    return m, h2
+
+
 @njit(cache=True, parallel=True)
 def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs_nc, vs_nc, bstat_b9):
     """The first half of a velocity-Verlet step fused with the pair loop's gathers, in row order.
@@ -391,13 +426,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
     for b in prange(nb):
         m = -1.0
         kk = -1
-        md = 0.0
-        lx = 1e300
-        ly = 1e300
-        lz = 1e300
-        hx = -1e300
-        hy = -1e300
-        hz = -1e300
+        acc = _disp_start()
         for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
             i = np.uint64(perm[k])
             p_nc[i, 0] += h * f_nc[i, 0]
@@ -425,28 +454,11 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
                 if not (m != m):
                     m = v2
                     kk = perm[k]
-            dx = x - ref_nc[i, 0]
-            dy = y - ref_nc[i, 1]
-            dz = z - ref_nc[i, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            if r2 != r2:
-                md = np.inf
-            md = max(md, r2)
-            lx = min(lx, dx)
-            hx = max(hx, dx)
-            ly = min(ly, dy)
-            hy = max(hy, dy)
-            lz = min(lz, dz)
-            hz = max(hz, dz)
+            acc = _disp_add(acc, x - ref_nc[i, 0], y - ref_nc[i, 1], z - ref_nc[i, 2])
         bstat_b9[b, 0] = m
         bstat_b9[b, 1] = kk
-        bstat_b9[b, 2] = md
-        bstat_b9[b, 3] = lx
-        bstat_b9[b, 4] = ly
-        bstat_b9[b, 5] = lz
-        bstat_b9[b, 6] = hx
-        bstat_b9[b, 7] = hy
-        bstat_b9[b, 8] = hz
+        for c in range(7):
+            bstat_b9[b, 2 + c] = acc[c]
     if n == 0:
         return 0.0, -1, 0.0, 0.0
     m = bstat_b9[0, 0]
@@ -457,19 +469,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
         if not bstat_b9[b, 0] <= m:
             m = bstat_b9[b, 0]
             kk = int(bstat_b9[b, 1])
-    md = 0.0
-    lo = np.full(3, 1e300)
-    hi = np.full(3, -1e300)
-    for b in range(nb):
-        md = max(md, bstat_b9[b, 2])
-        for d in range(3):
-            lo[d] = min(lo[d], bstat_b9[b, 3 + d])
-            hi[d] = max(hi[d], bstat_b9[b, 6 + d])
-    h2 = 0.0
-    for d in range(3):
-        h2 += 0.25 * (hi[d] - lo[d]) ** 2
-    if md == np.inf:
-        h2 = np.inf
+    md, h2 = _disp_result(bstat_b9[:, 2:])
     return m, kk, md, h2
 
 
@@ -485,50 +485,13 @@ def _displacement(pos_nc, ref_nc, out2):
     n = pos_nc.shape[0]
     nt = out2.shape[0]
     for t in prange(nt):
-        a = t * n // nt
-        b = (t + 1) * n // nt
-        m = 0.0
-        lx = 1e300
-        ly = 1e300
-        lz = 1e300
-        hx = -1e300
-        hy = -1e300
-        hz = -1e300
-        for i in range(a, b):
-            dx = pos_nc[i, 0] - ref_nc[i, 0]
-            dy = pos_nc[i, 1] - ref_nc[i, 1]
-            dz = pos_nc[i, 2] - ref_nc[i, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            if r2 != r2:
-                m = np.inf
-            m = max(m, r2)
-            lx = min(lx, dx)
-            hx = max(hx, dx)
-            ly = min(ly, dy)
-            hy = max(hy, dy)
-            lz = min(lz, dz)
-            hz = max(hz, dz)
-        out2[t, 0] = m
-        out2[t, 1] = lx
-        out2[t, 2] = ly
-        out2[t, 3] = lz
-        out2[t, 4] = hx
-        out2[t, 5] = hy
-        out2[t, 6] = hz
-    m = 0.0
-    lo = np.full(3, 1e300)
-    hi = np.full(3, -1e300)
-    for t in range(nt):
-        m = max(m, out2[t, 0])
-        for d in range(3):
-            lo[d] = min(lo[d], out2[t, 1 + d])
-            hi[d] = max(hi[d], out2[t, 4 + d])
-    h2 = 0.0
-    for d in range(3):
-        h2 += 0.25 * (hi[d] - lo[d]) ** 2
-    if m == np.inf:
-        h2 = np.inf
-    return m, h2
+        acc = _disp_start()
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            acc = _disp_add(acc, pos_nc[i, 0] - ref_nc[i, 0], pos_nc[i, 1] - ref_nc[i, 1],
+                            pos_nc[i, 2] - ref_nc[i, 2])
+        for c in range(7):
+            out2[t, c] = acc[c]
+    return _disp_result(out2)
 
 
 def _box_key(cell, pbc):
