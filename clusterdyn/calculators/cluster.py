@@ -85,11 +85,10 @@ class _Stats(dict):
             raise KeyError(key)
         if self._calc._ncompute != self._token:
             raise KeyError("closest: read it before the next compute")
-        kernel, args = self._args
+        kernel, args, stat, perm = self._args
         kernel(*args)
-        stat = args[12]
         k = int(np.argmin(stat[:, 1]))
-        v = (int(args[18][int(stat[k, 2])]), int(args[18][int(stat[k, 3])])) if stat[k, 2] >= 0 else (-1, -1)
+        v = (int(perm[int(stat[k, 2])]), int(perm[int(stat[k, 3])])) if stat[k, 2] >= 0 else (-1, -1)
         self[key] = v
         self._args = None
         return v
@@ -334,7 +333,9 @@ class ClusterDynamics(Calculator):
         if stat[k, 2] >= 0:
             stats["closest"] = (int(stat[k, 2]), int(stat[k, 3]))
         else:
-            stats._args = (K.KERNELS[multi, "virial"], args[:14] + (self._NO_V, self._NO_ETA) + args[16:])
+            # the tracking variant on the same arguments, without damping (vs, eta)
+            stats._args = (K.KERNELS[multi, "virial"], args[:14] + (self._NO_V, self._NO_ETA) + args[16:],
+                           stat, perm)
         self.last_stats = stats
         self._check_close(stat, types, step)
         forces = np.empty((n, 3)) if out is None else out

@@ -521,11 +521,9 @@ def check_cell(cell, pbc):
     return np.diag(cell).copy(), pbc
 
 
-#: forward half of the 3x3x3 cell stencil (own cell first), in slot order
-HALF_STENCIL = np.array([[0, 0, 0]] + [[a, b, c] for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
-                                       if (a, b, c) > (0, 0, 0)], dtype=np.int64)
-#: the same stencil as runs along the fastest slot: (d0, d1, first d2, last d2); the first run
-#: starts at the own cell (partners j > i there)
+#: the forward half of the 3x3x3 cell stencil (own cell and the 13 cells after it in slot
+#: order) as runs along the fastest slot: (d0, d1, first d2, last d2); the first run starts
+#: at the own cell (partners j > i there)
 HALF_RUNS = np.array([[0, 0, 0, 1], [0, 1, -1, 1], [1, -1, -1, 1], [1, 0, -1, 1], [1, 1, -1, 1]],
                      dtype=np.int64)
 
