@@ -22,6 +22,7 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
+from numba import njit  # noqa: E402
 
 #: particles per thread below which a kernel runs on fewer threads
 MIN_PARTICLES_PER_THREAD = 16384
@@ -53,3 +54,22 @@ def use_threads(n):
     k = threads_for(n)
     numba.set_num_threads(k)
     return k
+
+
+@njit(inline="always")
+def max_take(m, k, v, i):
+    """(largest value, its index) after offering value ``v`` of item ``i``; a NaN wins and stays
+    (the streaming passes' speed maximum, so a blown-up particle is the one reported)."""
+    if not v <= m and not (m != m):
+        return v, i
+    return m, k
+
+
+@njit(inline="always")
+def blocks_max(bmax_b, barg_b):
+    """:func:`max_take` over per-block maxima in block order: the same on any thread count."""
+    m = bmax_b[0]
+    k = barg_b[0]
+    for b in range(1, bmax_b.shape[0]):
+        m, k = max_take(m, k, bmax_b[b], barg_b[b])
+    return m, k

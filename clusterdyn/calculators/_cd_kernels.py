@@ -269,14 +269,13 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             if kb >= nb:
                 kb = nb - 1
             t = x - kb
-            c0 = coef[a, b, kb, 0]
             c1 = coef[a, b, kb, 1]
             c2 = coef[a, b, kb, 2]
             c3 = coef[a, b, kb, 3]
             de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
             e = 0.0
-            if ENERGY or PP:
-                e = c0 + t * (c1 + t * (c2 + t * c3))
+            if ENERGY:  # (every per-particle variant has it)
+                e = coef[a, b, kb, 0] + t * (c1 + t * (c2 + t * c3))
                 if INIT:
                     if free:
                         e += meta[a, b, 5]

@@ -12,7 +12,7 @@ on one thread (no fork and join).
 import numpy as np
 from numba import njit, prange
 
-from ..parallel import STREAM_BLOCK as BLOCK
+from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take
 
 
 @njit(cache=True, parallel=True)
@@ -28,7 +28,7 @@ def kick(p_nc, f_nc, h):
 
 
 @njit(cache=True, parallel=True)
-def drift(x_nc, p_nc, invm_n, dt, v2_n):
+def drift(x_nc, p_nc, invm_n, dt):
     """x += dt * p/m; returns (max v^2, its particle). NaN/inf speeds come back as max."""
     n = x_nc.shape[0]
     if n == 0:
@@ -46,23 +46,10 @@ def drift(x_nc, p_nc, invm_n, dt, v2_n):
             x_nc[i, 0] += dt * vx
             x_nc[i, 1] += dt * vy
             x_nc[i, 2] += dt * vz
-            v2 = vx * vx + vy * vy + vz * vz
-            v2_n[i] = v2
-            if not v2 <= m:  # also takes NaN
-                if not (m != m):
-                    m = v2
-                    k = i
+            m, k = max_take(m, k, vx * vx + vy * vy + vz * vz, i)
         bmax[b] = m
         barg[b] = k
-    m = bmax[0]
-    k = barg[0]
-    for b in range(1, nb):
-        if m != m:
-            break
-        if not bmax[b] <= m:
-            m = bmax[b]
-            k = barg[b]
-    return m, k
+    return blocks_max(bmax, barg)
 
 
 @njit(cache=True)

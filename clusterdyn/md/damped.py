@@ -148,7 +148,6 @@ class DampedVerlet(MolecularDynamics):
         self._own_forces = False
         self._epot = None
         self._eta = calc.damping_matrix(J) if J is not None else None
-        self._v2 = None
         self._fbuf = None
         self._fturn = 0
         self._safe = {}
@@ -280,8 +279,6 @@ class DampedVerlet(MolecularDynamics):
             I.kick(p, self.forces, h)
             for c in atoms.constraints:
                 c.adjust_momenta(atoms, p)
-            if self._v2 is None or len(self._v2) != len(atoms):
-                self._v2 = np.empty(len(atoms))
             if atoms.constraints and not all(isinstance(c, Piston) for c in atoms.constraints):
                 new = atoms.positions + self.dt * p * invm[:, None]
                 atoms.set_positions(new)
@@ -289,7 +286,7 @@ class DampedVerlet(MolecularDynamics):
                 k = int(np.argmax(v2))
                 v2max = v2[k]
             else:
-                v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt, self._v2)
+                v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt)
         self._check_speed(v2max, k)
         self.timings["integrate"] += time.perf_counter() - t0
         self.forces = self._compute_forces(kick=h if fused else None)

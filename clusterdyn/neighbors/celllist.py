@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import InputError
-from ..parallel import STREAM_BLOCK as BLOCK, use_threads
+from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take, use_threads
 
 #: blocks of the displacement check (fixed: the result does not depend on the thread count)
 DISP_BLOCKS = 16
@@ -449,11 +449,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
                 vs_nc[k, 0] = vx
                 vs_nc[k, 1] = vy
                 vs_nc[k, 2] = vz
-            v2 = vx * vx + vy * vy + vz * vz
-            if not v2 <= m:  # also takes NaN
-                if not (m != m):
-                    m = v2
-                    kk = perm[k]
+            m, kk = max_take(m, kk, vx * vx + vy * vy + vz * vz, perm[k])
             acc = _disp_add(acc, x - ref_nc[i, 0], y - ref_nc[i, 1], z - ref_nc[i, 2])
         bstat_b9[b, 0] = m
         bstat_b9[b, 1] = kk
@@ -461,16 +457,9 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
             bstat_b9[b, 2 + c] = acc[c]
     if n == 0:
         return 0.0, -1, 0.0, 0.0
-    m = bstat_b9[0, 0]
-    kk = int(bstat_b9[0, 1])
-    for b in range(1, nb):
-        if m != m:
-            break
-        if not bstat_b9[b, 0] <= m:
-            m = bstat_b9[b, 0]
-            kk = int(bstat_b9[b, 1])
+    m, kk = blocks_max(bstat_b9[:, 0], bstat_b9[:, 1])
     md, h2 = _disp_result(bstat_b9[:, 2:])
-    return m, kk, md, h2
+    return m, int(kk), md, h2
 
 
 @njit(cache=True, parallel=True)
