@@ -106,6 +106,34 @@ def worker_cd(a):
     print(json.dumps(out))
 
 
+def worker_paired(a):
+    """Two-thread efficiency in one process: rounds of ``--steps`` steps on 1 thread, then on 2.
+
+    The two windows of a round are adjacent in time and run the same scene in
+    the same memory, so a change of the machine's load between rounds, and the
+    page placement of a process, cancel; reported: the median over rounds of
+    rate(2 threads) / (2 rate(1 thread)), and each round's.
+    """
+    import numpy as np
+    from clusterdyn import units
+    from clusterdyn.parallel import set_max_threads
+    from clusterdyn.scenes.shock import build_shock
+    J = None if a.J == "none" else float(a.J)
+    s = build_shock(size=(a.nx, 16, 16), u=3 * units.km_s, J=J)
+    s.dyn.run(a.warmup)
+    eff = []
+    for _ in range(a.repeat):
+        t = {}
+        for th in (1, 2):
+            set_max_threads(th)
+            t0 = time.perf_counter()
+            s.dyn.run(a.steps)
+            t[th] = time.perf_counter() - t0
+        eff.append(t[1] / (2 * t[2]))
+    print(json.dumps({"N": len(s.atoms), "J": J, "steps": a.steps, "median": float(np.median(eff)),
+                      "per_round": eff}))
+
+
 def worker_specialise(a):
     """Undamped kernel vs a loop with no damping code vs the damped kernel with eta = 0."""
     import numpy as np
@@ -155,6 +183,69 @@ def worker_specialise(a):
             res[name] = min(res.get(name, 1e300), dt)
     print(json.dumps({"N": n, "threads": a.threads,
                       "ns_per_particle": {k: v / n * 1e9 for k, v in res.items()}}))
+
+
+def worker_ceiling(a):
+    """What a second thread adds on this machine, for three kinds of work (same work per thread).
+
+    ``fma``: independent vector multiply-adds, bound by the floating-point units'
+    throughput; ``chain``: one dependent multiply-add chain per thread, bound by
+    latency (leaves the units mostly idle); ``stream``: a multiply-add over two
+    arrays larger than the caches, bound by memory bandwidth.  Two separate
+    cores give 100% on all three; two hardware threads of one core (SMT, as a
+    VM's vCPUs may be) give about 50% on ``fma`` and near 100% on ``chain``.
+    A force loop sits between the two: it bounds what any code's two-thread
+    efficiency can be here.
+    """
+    import numpy as np
+    import numba
+    from numba import njit, prange
+    import clusterdyn.parallel  # noqa: F401  (the same OpenMP waiting policy as the runs)
+
+    @njit(fastmath=True, parallel=True)
+    def fma(a_tk, n):
+        for t in prange(a_tk.shape[0]):
+            for _ in range(n):
+                for k in range(64):              # rows are 128 long: no cache line shared by two threads
+                    a_tk[t, k] = a_tk[t, k] * 0.9999999 + 1e-7
+
+    @njit(parallel=True)
+    def chain(a_t, n):
+        for t in prange(a_t.shape[0] // 8):      # one cache line per thread
+            x = a_t[8 * t]
+            for _ in range(n):
+                x = x * 1.0000001 + 1e-9
+            a_t[8 * t] = x
+
+    @njit(parallel=True)
+    def stream(x_tn, y_tn, n):
+        for t in prange(x_tn.shape[0]):
+            for _ in range(n):
+                for i in range(x_tn.shape[1]):
+                    y_tn[t, i] = x_tn[t, i] * 1.0001 + y_tn[t, i]
+
+    def cases(th):
+        a, c = np.ones((th, 128)), np.ones(8 * th)
+        x, y = np.ones((th, 4_000_000)), np.zeros((th, 4_000_000))
+        return {"fma": lambda: fma(a, 20_000_000), "chain": lambda: chain(c, 100_000_000),
+                "stream": lambda: stream(x, y, 10)}
+    times = {}
+    for th in (1, 2):                             # compile
+        numba.set_num_threads(th)
+        for f in cases(th).values():
+            f()
+    for _ in range(a.repeat):
+        for th in (1, 2):
+            numba.set_num_threads(th)
+            for name, f in cases(th).items():
+                t0 = time.perf_counter()
+                f()
+                times.setdefault(name, {}).setdefault(th, []).append(time.perf_counter() - t0)
+    out = {}
+    for name, t in times.items():
+        eff = [t1 / t2 for t1, t2 in zip(t[1], t[2])]   # each repeat: 1 and 2 threads close in time
+        out[name] = {"median": float(np.median(eff)), "per_repeat": eff}
+    print(json.dumps(out))
 
 
 def worker_lammps(a):
@@ -247,7 +338,7 @@ def _fmt(x, spec=".3g"):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--worker", choices=["cd", "lammps", "latency", "specialise"])
+    ap.add_argument("--worker", choices=["cd", "lammps", "latency", "specialise", "ceiling", "paired"])
     ap.add_argument("--nx", type=int, default=32)
     ap.add_argument("--J", default="none")
     ap.add_argument("--threads", type=int, default=1)
@@ -265,7 +356,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     if a.worker:
         return {"cd": worker_cd, "lammps": worker_lammps, "latency": worker_latency,
-                "specialise": worker_specialise}[a.worker](a)
+                "specialise": worker_specialise, "ceiling": worker_ceiling, "paired": worker_paired}[a.worker](a)
 
     sys.path.insert(0, str(HERE.parent))
     from clusterdyn.io.lammps import lammps_available
@@ -307,6 +398,18 @@ def main(argv=None):
                         print(f"[{rep}] LAMMPS     N={r['N']} J={J} procs={p}: {r['rate']:.3g} particle-steps/s, "
                               f"{r['builds']} builds, load {r['load']:.1f}", flush=True)
     rows = aggregate(runs)
+    ceiling = None
+    paired = []
+    if 2 in threads:
+        for k in [int(x) for x in a.sizes.split(",")]:
+            for J in ("none", "50"):
+                r = _run(["--worker", "paired", "--nx", str(k * 1024 // (4 * 16 * 16)), "--J", J, "--steps", "20",
+                          "--warmup", str(a.warmup), "--repeat", str(max(8, a.repeat))])
+                paired.append(r)
+                print(f"paired N={r['N']} J={J}: two-thread efficiency median {r['median']:.0%} over rounds "
+                      f"({', '.join(format(x, '.0%') for x in r['per_round'])})", flush=True)
+        ceiling = _run(["--worker", "ceiling", "--repeat", str(max(5, a.repeat))])
+        print("two-thread ceiling:", ceiling, flush=True)
     spec = _run(["--worker", "specialise", "--nx", str(a.spec_size * 1024 // (4 * 16 * 16)), "--threads", "1",
                  "--warmup", str(a.warmup), "--repeat", str(a.repeat)])
     print("specialisation:", spec, flush=True)
@@ -314,7 +417,7 @@ def main(argv=None):
     warm = _cli_latency(tmp / "numba_cache_worker", tmp / "numba_cache_cli")
     print("latency cold:", cold, "\nlatency warm:", warm, flush=True)
     meta["load_end"] = os.getloadavg()
-    report = {"meta": meta, "rows": rows, "runs": runs, "specialisation": spec, "latency": {"cold": cold, "warm": warm}}
+    report = {"meta": meta, "rows": rows, "runs": runs, "specialisation": spec, "ceiling": ceiling, "paired": paired, "latency": {"cold": cold, "warm": warm}}
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(report, indent=1, default=str))
@@ -387,6 +490,28 @@ def markdown(rep):
             L.append(f"- set-up N = {r['N']} ({'off' if r['J'] is None else 'J = 50'}): build_shock "
                      f"{r['t_setup_s']:.2f} s, first step {r['t_first_step_s']:.3f} s, compile/cache load on a "
                      f"tiny scene {r['t_compile_s']:.2f} s")
+    pa = rep.get("paired")
+    if pa:
+        L += ["", "## Two-thread efficiency in one process (`--worker paired`)", "",
+              "Rounds of 20 steps on 1 thread then 20 on 2, in one process on one scene (the windows of a round "
+              "are adjacent in time, so a change of load between rounds cancels); efficiency = "
+              "rate(2) / (2 rate(1)), median over rounds.", "",
+              "| N | damping | median | per round |", "|---|---|---|---|"]
+        for r in pa:
+            L.append(f"| {r['N']} | {'off' if r['J'] is None else 'J = %g' % r['J']} | {r['median']:.0%} | "
+                     f"{', '.join(format(x, '.0%') for x in r['per_round'])} |")
+    ce = rep.get("ceiling")
+    if ce:
+        L += ["", "## What a second thread can add on this machine (`--worker ceiling`)", "",
+              "Same work per thread on 1 and 2 threads; efficiency = time on 1 / time on 2, per repeat "
+              "(both close in time) and their median. Two separate cores give 100% on every row; two hardware "
+              "threads of one core give about 50% on the first and 100% on the second.", "",
+              "| work | bound by | 2-thread efficiency, median | per repeat |", "|---|---|---|---|"]
+        what = {"fma": "floating-point throughput (vector multiply-adds)", "chain": "latency (one dependent chain)",
+                "stream": "memory bandwidth"}
+        for k, v in ce.items():
+            L.append(f"| {k} | {what.get(k, '')} | {v['median']:.0%} | "
+                     f"{', '.join(format(x, '.0%') for x in v['per_repeat'])} |")
     sp = rep.get("specialisation")
     if sp:
         L += ["", f"## Scene specialisation (N = {sp['N']}, 1 thread, force kernel alone, best of interleaved repeats)",

@@ -8,17 +8,32 @@ count depends only on N and the limit.  (The force sums do not depend on
 it at all: the kernels' chunks are fixed by N, see calculators._cd_kernels.)
 
 OpenMP waiting: numba's default ``omp`` threading layer lets idle workers
-spin, which on a machine shared with other jobs steals the cores the working
-threads need (measured: 2 threads at 1.9e6 particle-steps/s instead of 1.07e7
-under a load of 3.4 on 2 cores).  Unless the user set it, clusterdyn sets
-``OMP_WAIT_POLICY=PASSIVE`` before the OpenMP runtime starts (it is read
-once, when numba first runs a parallel kernel); idle workers then sleep.
+spin for about 3 ms (libgomp's default), which on a machine shared with other
+jobs steals the cores the working threads need (measured: 2 threads at 1.9e6
+particle-steps/s instead of 1.07e7 under a load of 3.4 on 2 cores).  Never
+spinning is no better on a quiet machine: a sleeping worker took about 70 us
+to start each parallel region here (a KVM guest), and a step has three
+regions, a list build two more; at 32k clusters that was a tenth of a
+two-thread step.  Unless the user set ``OMP_WAIT_POLICY`` or
+``GOMP_SPINCOUNT``, clusterdyn sets ``OMP_WAIT_POLICY=PASSIVE`` and
+``GOMP_SPINCOUNT`` = :data:`SPIN_COUNT` before the OpenMP runtime starts (it
+reads them once, when numba first runs a parallel kernel): an idle worker
+spins about 50-100 us, enough to bridge the Python between a step's regions,
+then sleeps.  (Measured, 32k, two threads against one in the same process:
+79% without spinning, 88% with it; with one other busy process on the 2
+cores a two-thread step was 15% slower with it, and slower than one thread
+either way: on a loaded machine use one thread.)  ``OMP_WAIT_POLICY=PASSIVE
+GOMP_SPINCOUNT=0`` restores pure sleeping.
 Streaming passes (kicks, drift, gathers, the rebuild check) run in parallel over
 fixed blocks too (they are a tenth of a step; serial they cap two threads at 80%).
 """
 
 import os
 
+#: libgomp spin iterations before an idle worker sleeps (see the module docstring)
+SPIN_COUNT = 5000
+if "OMP_WAIT_POLICY" not in os.environ and "GOMP_SPINCOUNT" not in os.environ:
+    os.environ["GOMP_SPINCOUNT"] = str(SPIN_COUNT)
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
