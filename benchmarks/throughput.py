@@ -17,9 +17,13 @@ first-step time; for LAMMPS its loop time without output and its own memory
 figure.  Ratios clusterdyn/LAMMPS are at equal parallelism (threads vs ranks).
 
 Separately: numba compile time and first-step latency of ``clusterdyn run
-shock`` with a cold and a warm on-disk cache, and the scene-specialisation
+shock`` with a cold and a warm on-disk cache, the scene-specialisation
 check (the undamped kernel against a hand-written loop with no damping code,
-and against the damped kernel with a zero coefficient).
+and against the damped kernel with a zero coefficient), the two-thread
+efficiency measured inside one process (``--worker paired``: 1- and 2-thread
+windows alternating on one scene), and what a second thread adds on the
+machine for floating-point, latency- and memory-bound loops (``--worker
+ceiling``).
 
 The machine is shared: the script records the load average; compare ratios
 measured in the same run.  Results go to benchmarks/results/throughput.md and
@@ -403,7 +407,9 @@ def main(argv=None):
     if 2 in threads:
         for k in [int(x) for x in a.sizes.split(",")]:
             for J in ("none", "50"):
-                r = _run(["--worker", "paired", "--nx", str(k * 1024 // (4 * 16 * 16)), "--J", J, "--steps", "20",
+                # windows of about 4e6 particle-steps (0.4 s on one thread): shorter ones scatter
+                steps = max(20, 4_000_000 // (k * 1024))
+                r = _run(["--worker", "paired", "--nx", str(k * 1024 // (4 * 16 * 16)), "--J", J, "--steps", str(steps),
                           "--warmup", str(a.warmup), "--repeat", str(max(8, a.repeat))])
                 paired.append(r)
                 print(f"paired N={r['N']} J={J}: two-thread efficiency median {r['median']:.0%} over rounds "
@@ -493,7 +499,7 @@ def markdown(rep):
     pa = rep.get("paired")
     if pa:
         L += ["", "## Two-thread efficiency in one process (`--worker paired`)", "",
-              "Rounds of 20 steps on 1 thread then 20 on 2, in one process on one scene (the windows of a round "
+              "Rounds of S steps on 1 thread then S on 2 (S = max(20, 4e6 / N)), in one process on one scene (the windows of a round "
               "are adjacent in time, so a change of load between rounds cancels); efficiency = "
               "rate(2) / (2 rate(1)), median over rounds.", "",
               "| N | damping | median | per round |", "|---|---|---|---|"]

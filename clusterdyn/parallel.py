@@ -17,7 +17,8 @@ regions, a list build two more; at 32k clusters that was a tenth of a
 two-thread step.  Unless the user set ``OMP_WAIT_POLICY`` or
 ``GOMP_SPINCOUNT``, clusterdyn sets ``OMP_WAIT_POLICY=PASSIVE`` and
 ``GOMP_SPINCOUNT`` = :data:`SPIN_COUNT` before the OpenMP runtime starts (it
-reads them once, when numba first runs a parallel kernel): an idle worker
+reads them once, when numba first runs a parallel kernel; ``import clusterdyn``
+makes them, :mod:`clusterdyn._openmp`): an idle worker
 spins about 50-100 us, enough to bridge the Python between a step's regions,
 then sleeps.  (Measured, 32k, two threads against one in the same process:
 79% without spinning, 88% with it; with one other busy process on the 2
@@ -28,13 +29,7 @@ Streaming passes (kicks, drift, gathers, the rebuild check) run in parallel over
 fixed blocks too (they are a tenth of a step; serial they cap two threads at 80%).
 """
 
-import os
-
-#: libgomp spin iterations before an idle worker sleeps (see the module docstring)
-SPIN_COUNT = 5000
-if "OMP_WAIT_POLICY" not in os.environ and "GOMP_SPINCOUNT" not in os.environ:
-    os.environ["GOMP_SPINCOUNT"] = str(SPIN_COUNT)
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+from ._openmp import SPIN_COUNT  # noqa: F401  (the settings are made when clusterdyn is imported)
 
 import numba  # noqa: E402
 from numba import njit  # noqa: E402
