@@ -1,7 +1,8 @@
 """A hand-written single-material CD pair loop with no damping code at all (benchmark reference).
 
 Same list, chunks, buffers and work (forces, the smallest distance, the count of pairs
-below the table; no energy) as ``clusterdyn.calculators._cd_kernels.cd_forces_1``; used by
+below the table, no energy; the rows no other chunk touches written out after the chunk's
+loop) as ``clusterdyn.calculators._cd_kernels.cd_forces_1``; used by
 throughput.py to show that the library's undamped variant costs what a loop
 written without the damping term costs.
 """
@@ -11,7 +12,8 @@ from numba import njit, prange
 
 
 @njit(cache=True, parallel=True)
-def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k, f_mc, stat_k):
+def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k, f_mc, stat_k,
+                     shared_n, perm_n, out_nc):
     nb = coef.shape[2]
     smin = meta[0, 0, 0]
     invh = meta[0, 0, 1]
@@ -73,6 +75,12 @@ def reference_forces(xs_nc, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
             f_mc[off + i, 0] += fxi
             f_mc[off + i, 1] += fyi
             f_mc[off + i, 2] += fzi
+        for i in range(bounds_k[k], bounds_k[k + 1]):
+            if shared_n[i] == 0:
+                o = np.uint64(perm_n[i])
+                out_nc[o, 0] = f_mc[off + i, 0]
+                out_nc[o, 1] = f_mc[off + i, 1]
+                out_nc[o, 2] = f_mc[off + i, 2]
         stat_k[k, 0] = 0.0
         stat_k[k, 1] = minr2
         stat_k[k, 2] = -1

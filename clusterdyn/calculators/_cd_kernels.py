@@ -24,6 +24,13 @@ variant; LLVM removes the code of every term a variant does not use.
 - ``ENERGY``: the pair energy (the dynamics' steps leave it out, about a
   tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it only
   when it is read).
+- ``FIN``: the step kernels (forces only, damped or not) also write the
+  force of every row no other chunk touches to ``out_nc[perm_n[i]]``, with
+  the half kick ``p_nc += h f`` when ``p_nc`` is not empty, right after the
+  chunk's loop (its buffer rows are still in cache); :func:`reduce_shared`
+  then sums only the shared rows, often few enough for one thread.  The sum
+  of a row with one term is that term, so the forces are the same bits as
+  :func:`reduce_rows` gives.
 - ``TRACK``: the rows of the closest pair (the single-material steps keep
   only its distance; the calculator reruns a tracking variant when the pair
   is asked for, which with one material is only to name it in an error).
@@ -52,6 +59,8 @@ from numba import njit, prange
 
 #: rows per chunk: the unit of work of a thread and of the summation order
 CHUNK_ROWS = 16384
+#: shared rows per block of :func:`reduce_shared`
+SHARED_BLOCK = 4096
 
 
 @njit(inline="always")
@@ -86,27 +95,51 @@ def chunk_bounds(first_n, nchunks):
 
 @njit(cache=True)
 def chunk_layout(first_n, j_p, nchunks):
-    """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist).
+    """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist, shared_n, shared_r, owner_r).
 
     Chunk k owns rows ``bounds_k[k]:bounds_k[k+1]`` and writes rows
     ``span_k2[k, 0]:span_k2[k, 1]`` into buffer rows starting at ``boff_k[k]``;
     ``clist[cptr_k[k]:cptr_k[k+1]]`` are the chunks (ascending) whose span meets
     the rows chunk k owns: the terms of those rows' sums, in order.
+    ``shared_n[i]`` is 1 for a row that a chunk other than its owner writes (a
+    partner row across a chunk boundary); ``shared_r`` lists them ascending and
+    ``owner_r`` their owner chunks.  Every other row's force is its owner's buffer
+    row alone, which the step kernels write out themselves (``FIN``).
     """
     bounds = chunk_bounds(first_n, nchunks)
     nk = nchunks
+    n = first_n.shape[0] - 1
     span = np.empty((nk, 2), np.int64)
+    shared_n = np.zeros(n, np.uint8)
     for k in range(nk):
         lo = bounds[k]
         hi = bounds[k + 1]
-        for p in range(first_n[bounds[k]], first_n[bounds[k + 1]]):
+        b0 = bounds[k]
+        b1 = bounds[k + 1]
+        for p in range(first_n[b0], first_n[b1]):
             j = j_p[p]
             if j < lo:
                 lo = j
             if j + 1 > hi:
                 hi = j + 1
+            if j < b0 or j >= b1:
+                shared_n[j] = 1
         span[k, 0] = lo
         span[k, 1] = hi
+    nsh = 0
+    for i in range(n):
+        nsh += shared_n[i]
+    shared_r = np.empty(nsh, np.int64)
+    owner_r = np.empty(nsh, np.int64)
+    q = 0
+    k = 0
+    for i in range(n):
+        if shared_n[i]:
+            while i >= bounds[k + 1]:
+                k += 1
+            shared_r[q] = i
+            owner_r[q] = k
+            q += 1
     boff = np.zeros(nk + 1, np.int64)
     for k in range(nk):
         boff[k + 1] = boff[k] + span[k, 1] - span[k, 0]
@@ -124,7 +157,49 @@ def chunk_layout(first_n, j_p, nchunks):
                 clist[q] = kk
                 q += 1
         cptr[k + 1] = q
-    return bounds, span, boff, cptr, clist
+    return bounds, span, boff, cptr, clist, shared_n, shared_r, owner_r
+
+
+@njit(inline="always")
+def _row_sum3(buf_mc, i, q0, q1, clist, span_k2, boff_k):
+    """Sum of row i's three columns over the chunks ``clist[q0:q1]`` whose span holds it, in order."""
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    for q in range(q0, q1):
+        kk = clist[q]
+        if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
+            r = boff_k[kk] + i - span_k2[kk, 0]
+            sx += buf_mc[r, 0]
+            sy += buf_mc[r, 1]
+            sz += buf_mc[r, 2]
+    return sx, sy, sz
+
+
+@njit(cache=True)
+def _put3(out_nc, p_nc, o, sx, sy, sz, kick, h):
+    """out[o] = s, and the half kick p[o] += h s when ``kick``."""
+    out_nc[o, 0] = sx
+    out_nc[o, 1] = sy
+    out_nc[o, 2] = sz
+    if kick:
+        p_nc[o, 0] += h * sx
+        p_nc[o, 1] += h * sy
+        p_nc[o, 2] += h * sz
+
+
+@njit(cache=True, parallel=True)
+def reduce_shared(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, shared_r, owner_r, out_nc, p_nc, h):
+    """:func:`reduce_rows` (three columns) over the shared rows only: the step kernels (``FIN``)
+    have written every other row.  Fixed blocks of rows, so the same on any thread count."""
+    kick = p_nc.shape[0] > 0
+    m = shared_r.shape[0]
+    for b in prange((m + SHARED_BLOCK - 1) // SHARED_BLOCK):
+        for q in range(b * SHARED_BLOCK, min(m, (b + 1) * SHARED_BLOCK)):
+            i = shared_r[q]
+            k = owner_r[q]
+            sx, sy, sz = _row_sum3(buf_mc, i, cptr_k[k], cptr_k[k + 1], clist, span_k2, boff_k)
+            _put3(out_nc, p_nc, np.uint64(perm_n[i]), sx, sy, sz, kick, h)
 
 
 @njit(cache=True, parallel=True)
@@ -144,23 +219,8 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
         for i in range(bounds_k[k], bounds_k[k + 1]):
             o = np.uint64(perm_n[i])
             if nc == 3:
-                sx = 0.0
-                sy = 0.0
-                sz = 0.0
-                for q in range(q0, q1):
-                    kk = clist[q]
-                    if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
-                        r = boff_k[kk] + i - span_k2[kk, 0]
-                        sx += buf_mc[r, 0]
-                        sy += buf_mc[r, 1]
-                        sz += buf_mc[r, 2]
-                out_nc[o, 0] = sx
-                out_nc[o, 1] = sy
-                out_nc[o, 2] = sz
-                if kick:
-                    p_nc[o, 0] += h * sx
-                    p_nc[o, 1] += h * sy
-                    p_nc[o, 2] += h * sz
+                sx, sy, sz = _row_sum3(buf_mc, i, q0, q1, clist, span_k2, boff_k)
+                _put3(out_nc, p_nc, o, sx, sy, sz, kick, h)
             else:
                 for c in range(nc):
                     out_nc[o, c] = 0.0
@@ -174,9 +234,17 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
 
 @njit(inline="always")
 def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-           f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-           MULTI, DAMP, VIR, PP, INIT, ENERGY, TRACK):
-    """The pair loop of chunk k (see the module docstring for the flags)."""
+           f_mc, stat_k, vir_k6, vs_nc, eta_tt, pp, perm_n, init, fin,
+           MULTI, DAMP, VIR, PP, INIT, ENERGY, TRACK, FIN):
+    """The pair loop of chunk k (see the module docstring for the flags).
+
+    ``pp = (e_m1, w_m6)``, ``init = (bonds_nk, id_n)``, ``fin = (shared_n, out_nc, p_nc, h)``:
+    grouped so that a call stays under CPython's 30 positional arguments (beyond
+    them it passes a tuple, which numba can not inline).
+    """
+    e_m1, w_m6 = pp
+    bonds_nk, id_n = init
+    shared_n, out_nc, p_nc, h = fin
     off = boff_k[k] - span_k2[k, 0]
     zero_img = image_sc.shape[0] // 2
     for r in range(boff_k[k], boff_k[k + 1]):
@@ -330,6 +398,12 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
         f_mc[off + i, 0] += fxi
         f_mc[off + i, 1] += fyi
         f_mc[off + i, 2] += fzi
+    if FIN:
+        kick = p_nc.shape[0] > 0
+        for i in range(bounds_k[k], bounds_k[k + 1]):
+            if shared_n[i] == 0:
+                r = off + i
+                _put3(out_nc, p_nc, np.uint64(perm_n[i]), f_mc[r, 0], f_mc[r, 1], f_mc[r, 2], kick, h)
     if not MULTI:
         minr2 *= meta[0, 0, 4]
     stat_k[k, 0] = energy
@@ -349,87 +423,90 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
 
 @njit(cache=True, parallel=True)
 def cd_forces_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
+                shared_n, out_nc, p_nc, h):
     """One material: forces only (the dynamics' undamped step)."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, False, False, False, False, False)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), False, False, False, False, False, False, False, True)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_virial_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                        boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                       initial_only):
+                       initial_only, shared_n, out_nc, p_nc, h):
     """One material: forces, energy and cell virial."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, False, False, True, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), False, False, True, False, False, True, True, False)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_damped_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                        boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                       initial_only):
+                       initial_only, shared_n, out_nc, p_nc, h):
     """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order), no energy."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, True, False, False, False, False, False)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), False, True, False, False, False, False, False, True)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_per_particle_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                              boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk,
-                             id_n, initial_only):
+                             id_n, initial_only, shared_n, out_nc, p_nc, h):
     """One material: forces, energy, virial and per-particle energies and virials."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               False, False, True, True, False, True, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), False, False, True, True, False, True, True, False)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-                    f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+                    f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
+                    shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): forces, energy and cell virial."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, False, initial_only, True, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), True, False, True, False, initial_only, True, True, False)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_only_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-                         f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only):
+                         f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
+                         shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): forces only (the dynamics' undamped step)."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, False, False, initial_only, False, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), True, False, False, False, initial_only, False, True, True)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_damped_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
                            boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                           initial_only):
+                           initial_only, shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): conservative + pair damping forces, no energy."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, True, False, False, initial_only, False, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), True, True, False, False, initial_only, False, True, True)
 
 
 @njit(cache=True, parallel=True)
 def cd_forces_per_particle_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
                                  span_k2, boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n,
-                                 bonds_nk, id_n, initial_only):
+                                 bonds_nk, id_n, initial_only, shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): with per-particle energies and virials."""
     for k in prange(bounds_k.shape[0] - 1):
         _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-               True, False, True, True, initial_only, True, True)
+               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
+               (shared_n, out_nc, p_nc, h), True, False, True, True, initial_only, True, True, False)
 
 
 #: kernel by (multi, mode), mode in "forces", "virial", "damped", "per_particle"

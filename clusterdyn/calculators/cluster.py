@@ -243,8 +243,8 @@ class ClusterDynamics(Calculator):
             self._buffers = lay
         if lay["key"] != nl.nbuilds:
             nk = max(1, n // K.CHUNK_ROWS)
-            lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"] = \
-                K.chunk_layout(nl.first_n, nl.j_p, nk)
+            (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], lay["shared_n"],
+             lay["shared_r"], lay["owner_r"]) = K.chunk_layout(nl.first_n, nl.j_p, nk)
             lay["stat_k"] = np.empty((nk, 5))
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["boff"][-1])
@@ -277,9 +277,10 @@ class ClusterDynamics(Calculator):
         ``energy=False`` the pair energy (the dynamics' steps; the result's
         ``"energy"`` is then None).  With damping the energy takes a second,
         conservative pass.  ``kick = (momenta_nc, h)`` adds ``h * forces`` to
-        the momenta in the pass that sums the forces (the dynamics' second half
-        kick).  Raises InstabilityError if a pair is closer than the tabulated
-        range.
+        the momenta in the passes that write the forces (the dynamics' second
+        half kick).  Raises InstabilityError if a pair is closer than the
+        tabulated range (the step has failed then: the rows the pair loop wrote
+        itself may have had their kick).
 
         The kernel is chosen per call from what is asked: one material or
         several (or ``attraction="initial"``), with or without damping, cell
@@ -318,9 +319,14 @@ class ClusterDynamics(Calculator):
         else:
             mode = "forces"
         stat, vir = lay["stat_k"], lay["vir_k6"]
+        forces = np.empty((n, 3)) if out is None else out
+        # the step kernels (forces only, damped or not) write the rows no other chunk touches
+        # themselves, with the half kick; reduce_shared sums the rest
+        fin = mode in ("forces", "damped")
+        p_kick, h = (self._NO_V, 0.0) if kick is None else (kick[0], float(kick[1]))
         args = (xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, lay["bounds"],
                 lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"], perm,
-                bonds, ids, initial)
+                bonds, ids, initial, lay["shared_n"], forces, p_kick, h)
         K.KERNELS[multi, mode](*args)
         for c in (2, 3):
             for k in range(stat.shape[0]):
@@ -338,12 +344,13 @@ class ClusterDynamics(Calculator):
                            stat, perm)
         self.last_stats = stats
         self._check_close(stat, types, step)
-        forces = np.empty((n, 3)) if out is None else out
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
-        if kick is None:
-            K.reduce_rows(lay["f_m3"], *red, forces, self._NO_V, 0.0)
+        if fin:
+            use_threads(lay["shared_r"].shape[0])
+            K.reduce_shared(lay["f_m3"], *red, lay["shared_r"], lay["owner_r"], forces, p_kick, h)
+            use_threads(n)
         else:
-            K.reduce_rows(lay["f_m3"], *red, forces, kick[0], float(kick[1]))
+            K.reduce_rows(lay["f_m3"], *red, forces, p_kick, h)
         res = {"forces": forces, "energy": float(stat[:, 0].sum()) if mode not in ("forces", "damped") else None}
         if mode in ("virial", "per_particle"):
             res["virial"] = vir.sum(axis=0)

@@ -129,3 +129,28 @@ def test_closest_pair_found_when_read_is_the_tracked_one():
     s.dyn.run(1)
     with pytest.raises(KeyError, match="before the next compute"):
         old["closest"]
+
+
+@pytest.mark.parametrize("periodic_x", [False, True])
+def test_step_kernels_write_unshared_rows_as_the_full_sum_does(periodic_x):
+    """The step kernels write each row no other chunk touches themselves (with the half kick)
+    and sum only the shared rows after: the same bits as summing every row afterwards."""
+    s = build_shock(size=(64, 16, 16), u=3 * units.km_s, J=None, seed=5)    # 65536: four chunks
+    a, c = s.atoms, s.calc
+    s.dyn.run(30)
+    if periodic_x:       # pairs across the x faces: the first and last chunks share rows
+        a.pbc = True
+        a.cell[0, 0] = a.positions[:, 0].max() + 0.9 * c.potentials[0].r0
+    f_all = c.compute(a)["forces"].copy()                      # virial kernel: every row summed after
+    lay = c._buffers
+    assert len(lay["bounds"]) - 1 == 4
+    shared = lay["shared_r"].shape[0]
+    assert 0 < shared < len(a) // 4
+    p0 = a.arrays["momenta"].copy()
+    p = p0.copy()
+    h = 0.37
+    f_fin = c.compute(a, virial=False, energy=False, kick=(p, h))["forces"]
+    assert np.array_equal(f_fin, f_all)
+    assert np.array_equal(p, p0 + h * f_all)
+    f_fin2 = c.compute(a, virial=False, energy=False)["forces"]        # no kick: momenta untouched
+    assert np.array_equal(f_fin2, f_all)
