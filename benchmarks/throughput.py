@@ -426,12 +426,23 @@ def main(argv=None):
     warm = _cli_latency(tmp / "numba_cache_worker", tmp / "numba_cache_cli")
     print("latency cold:", cold, "\nlatency warm:", warm, flush=True)
     meta["load_end"] = os.getloadavg()
-    report = {"meta": meta, "rows": rows, "runs": runs, "specialisation": spec, "ceiling": ceiling, "paired": paired, "latency": {"cold": cold, "warm": warm}}
+    report = {"meta": meta, "rows": rows, "runs": runs, "specialisation": spec, "ceiling": ceiling,
+              "paired": paired, "latency": {"cold": cold, "warm": warm}}
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(report, indent=1, default=str))
     out.with_suffix(".md").write_text(markdown(report))
     print(markdown(report))
+
+
+def _pcts(xs):
+    return ", ".join(format(x, ".0%") for x in xs)
+
+
+def _section(title, text, columns, rows):
+    """Markdown lines of a section: its title, a paragraph, a table."""
+    return (["", f"## {title}", "", text, "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+            + ["| " + " | ".join(r) + " |" for r in rows])
 
 
 def markdown(rep):
@@ -501,26 +512,25 @@ def markdown(rep):
                      f"tiny scene {r['t_compile_s']:.2f} s")
     pa = rep.get("paired")
     if pa:
-        L += ["", "## Two-thread efficiency in one process (`--worker paired`)", "",
-              "Rounds of S steps on 1 thread then S on 2 (S = max(20, 4e6 / N)), in one process on one scene (the windows of a round "
-              "are adjacent in time, so a change of load between rounds cancels); efficiency = "
-              "rate(2) / (2 rate(1)), median over rounds.", "",
-              "| N | damping | median | per round |", "|---|---|---|---|"]
-        for r in pa:
-            L.append(f"| {r['N']} | {'off' if r['J'] is None else 'J = %g' % r['J']} | {r['median']:.0%} | "
-                     f"{', '.join(format(x, '.0%') for x in r['per_round'])} |")
+        L += _section(
+            "Two-thread efficiency in one process (`--worker paired`)",
+            "Rounds of S steps on 1 thread then S on 2 (S = max(20, 4e6 / N)), in one process on one scene "
+            "(the windows of a round are adjacent in time, so a change of load between rounds cancels); "
+            "efficiency = rate(2) / (2 rate(1)), median over rounds.",
+            ["N", "damping", "median", "per round"],
+            [[str(r["N"]), "off" if r["J"] is None else f"J = {r['J']:g}", f"{r['median']:.0%}", _pcts(r["per_round"])]
+             for r in pa])
     ce = rep.get("ceiling")
     if ce:
-        L += ["", "## What a second thread can add on this machine (`--worker ceiling`)", "",
-              "Same work per thread on 1 and 2 threads; efficiency = time on 1 / time on 2, per repeat "
-              "(both close in time) and their median. Two separate cores give 100% on every row; two hardware "
-              "threads of one core give about 50% on the first and 100% on the second.", "",
-              "| work | bound by | 2-thread efficiency, median | per repeat |", "|---|---|---|---|"]
         what = {"fma": "floating-point throughput (vector multiply-adds)", "chain": "latency (one dependent chain)",
                 "stream": "memory bandwidth"}
-        for k, v in ce.items():
-            L.append(f"| {k} | {what.get(k, '')} | {v['median']:.0%} | "
-                     f"{', '.join(format(x, '.0%') for x in v['per_repeat'])} |")
+        L += _section(
+            "What a second thread can add on this machine (`--worker ceiling`)",
+            "Same work per thread on 1 and 2 threads; efficiency = time on 1 / time on 2, per repeat (both close "
+            "in time) and their median. Two separate cores give 100% on every row; two hardware threads of one "
+            "core give about 50% on the first and 100% on the second.",
+            ["work", "bound by", "2-thread efficiency, median", "per repeat"],
+            [[k, what.get(k, ""), f"{v['median']:.0%}", _pcts(v["per_repeat"])] for k, v in ce.items()])
     sp = rep.get("specialisation")
     if sp:
         L += ["", f"## Scene specialisation (N = {sp['N']}, 1 thread, force kernel alone, best of interleaved repeats)",
