@@ -199,10 +199,10 @@ def worker_ceiling(a):
     throughput; ``chain``: one dependent multiply-add chain per thread, bound by
     latency (leaves the units mostly idle); ``stream``: a multiply-add over two
     arrays larger than the caches, bound by memory bandwidth.  Two separate
-    cores give 100% on all three; two hardware threads of one core (SMT, as a
-    VM's vCPUs may be) give about 50% on ``fma`` and near 100% on ``chain``.
-    A force loop sits between the two: it bounds what any code's two-thread
-    efficiency can be here.
+    cores give 100% on the first two; two hardware threads of one core (SMT, as
+    a VM's vCPUs may be) give about 50% on ``fma``.  ``stream`` shows how much
+    of the memory bandwidth the two share (the streaming passes of a step
+    depend on it).  Each thread's data starts on its own cache line.
     """
     import numpy as np
     import numba
@@ -232,9 +232,9 @@ def worker_ceiling(a):
                     y_tn[t, i] = x_tn[t, i] * 1.0001 + y_tn[t, i]
 
     def cases(th):
-        a, c = np.ones((th, 128)), np.ones(8 * th)
+        acc_tk, chain_t = np.ones((th, 128)), np.ones(8 * th)
         x, y = np.ones((th, 4_000_000)), np.zeros((th, 4_000_000))
-        return {"fma": lambda: fma(a, 20_000_000), "chain": lambda: chain(c, 100_000_000),
+        return {"fma": lambda: fma(acc_tk, 20_000_000), "chain": lambda: chain(chain_t, 100_000_000),
                 "stream": lambda: stream(x, y, 10)}
     times = {}
     for th in (1, 2):                             # compile
@@ -412,11 +412,11 @@ def main(argv=None):
             for J in ("none", "50"):
                 # windows of about 4e6 particle-steps (0.4 s on one thread): shorter ones scatter
                 steps = max(20, 4_000_000 // (k * 1024))
-                r = _run(["--worker", "paired", "--nx", str(k * 1024 // (4 * 16 * 16)), "--J", J, "--steps", str(steps),
-                          "--warmup", str(a.warmup), "--repeat", str(max(8, a.repeat))])
+                r = _run(["--worker", "paired", "--nx", str(k * 1024 // (4 * 16 * 16)), "--J", J,
+                          "--steps", str(steps), "--warmup", str(a.warmup), "--repeat", str(max(8, a.repeat))])
                 paired.append(r)
                 print(f"paired N={r['N']} J={J}: two-thread efficiency median {r['median']:.0%} over rounds "
-                      f"({', '.join(format(x, '.0%') for x in r['per_round'])})", flush=True)
+                      f"({_pcts(r['per_round'])})", flush=True)
         ceiling = _run(["--worker", "ceiling", "--repeat", str(max(5, a.repeat))])
         print("two-thread ceiling:", ceiling, flush=True)
     spec = _run(["--worker", "specialise", "--nx", str(a.spec_size * 1024 // (4 * 16 * 16)), "--threads", "1",
@@ -472,7 +472,8 @@ def markdown(rep):
         else:
             par = r["procs"]
             ratio = None
-            mem = r["memory_mb_total"] * 2 ** 20 / r["N"] if r.get("memory_mb_total") == r.get("memory_mb_total") else None
+            mb = r.get("memory_mb_total")
+            mem = mb * 2 ** 20 / r["N"] if mb == mb and mb is not None else None
             builds = f"{r['builds']} / {r['steps']}"
         L.append(f"| {r['N']} | {damp} | {r['engine']} | {par} | {r['rate']:.3g} | "
                  f"{_fmt(ratio, '.2f') if ratio else ''} | {builds} | {_fmt(mem, '.0f')} | {r['load']:.1f} | "
@@ -518,8 +519,8 @@ def markdown(rep):
             "(the windows of a round are adjacent in time, so a change of load between rounds cancels); "
             "efficiency = rate(2) / (2 rate(1)), median over rounds.",
             ["N", "damping", "median", "per round"],
-            [[str(r["N"]), "off" if r["J"] is None else f"J = {r['J']:g}", f"{r['median']:.0%}", _pcts(r["per_round"])]
-             for r in pa])
+            [[str(r["N"]), "off" if r["J"] is None else f"J = {r['J']:g}", f"{r['median']:.0%}",
+              _pcts(r["per_round"])] for r in pa])
     ce = rep.get("ceiling")
     if ce:
         what = {"fma": "floating-point throughput (vector multiply-adds)", "chain": "latency (one dependent chain)",

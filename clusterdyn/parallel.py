@@ -12,8 +12,8 @@ spin for about 3 ms (libgomp's default), which on a machine shared with other
 jobs steals the cores the working threads need (measured: 2 threads at 1.9e6
 particle-steps/s instead of 1.07e7 under a load of 3.4 on 2 cores).  Never
 spinning is no better on a quiet machine: a sleeping worker took about 70 us
-to start each parallel region here (a KVM guest), and a step has three
-regions, a list build two more; at 32k clusters that was a tenth of a
+to start each parallel region here (a KVM guest), and a step has two or
+three regions, a list build two more; at 32k clusters that was a tenth of a
 two-thread step.  Unless the user set ``OMP_WAIT_POLICY`` or
 ``GOMP_SPINCOUNT``, clusterdyn sets ``OMP_WAIT_POLICY=PASSIVE`` and
 ``GOMP_SPINCOUNT`` = :data:`SPIN_COUNT` before the OpenMP runtime starts (it
