@@ -73,8 +73,16 @@ def _print_result(res, args):
             print(f"wrote {f}")
 
 
+def _threads(args):
+    """``--threads N``: the kernels' thread limit for this run (default: numba's, NUMBA_NUM_THREADS)."""
+    if args.threads is not None:
+        from .parallel import set_max_threads
+        set_max_threads(args.threads)
+
+
 def cmd_run(args):
     from .scenes import get_scene
+    _threads(args)
     overrides = {}
     if args.config:
         cfg, scene_name = _read_config(args.config)
@@ -96,6 +104,7 @@ def cmd_run(args):
 
 def cmd_study(args):
     from .studies import get_study
+    _threads(args)
     study = get_study(args.study)
     out = Path(args.out) if args.out else None
     res = study(_parse_sets(args.set), out=out, progress=not (args.quiet or args.json))
@@ -161,6 +170,8 @@ def build_parser():
     r.add_argument("--json", action="store_true")
     r.add_argument("--quiet", action="store_true")
     r.add_argument("--restart", metavar="CHECKPOINT")
+    r.add_argument("--threads", type=int, metavar="N", help="threads of the kernels (default: all; "
+                   "one is faster on a machine busy with other jobs)")
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("study", help="run a study (hugoniot, convergence, stability)")
     s.add_argument("study")
@@ -168,6 +179,7 @@ def build_parser():
     s.add_argument("--out", metavar="DIR")
     s.add_argument("--json", action="store_true")
     s.add_argument("--quiet", action="store_true")
+    s.add_argument("--threads", type=int, metavar="N", help="threads of the kernels (default: all)")
     s.set_defaults(func=cmd_study)
     sub.add_parser("list", help="scenes and their parameters").set_defaults(func=cmd_list)
     sub.add_parser("materials", help="the material library").set_defaults(func=cmd_materials)

@@ -39,6 +39,8 @@ def test_ten_kinds_of_bad_input(tmp_path):
         (["run", "shock", "--set", "rc=1.6"], "rc="),
         (["run", "shock", "--set", "direction=123"], "direction="),
         (["info", str(tmp_path / "nothere.h5md")], "FILE="),
+        (["run", "shock", "--threads", "0"], "threads="),
+        (["run", "shock", "--threads", "two"], "command line"),
         (["frobnicate"], "command line"),
     ]
     for args, word in cases:
