@@ -351,7 +351,7 @@ class ClusterDynamics(Calculator):
             use_threads(n)
         else:
             K.reduce_rows(lay["f_m3"], *red, forces, p_kick, h)
-        res = {"forces": forces, "energy": float(stat[:, 0].sum()) if mode not in ("forces", "damped") else None}
+        res = {"forces": forces, "energy": None if fin else float(stat[:, 0].sum())}
         if mode in ("virial", "per_particle"):
             res["virial"] = vir.sum(axis=0)
         if per_particle:

@@ -265,8 +265,8 @@ class DampedVerlet(MolecularDynamics):
         # Pistons and walls only (or no constraints) with the CD calculator: the kicks and the
         # drift run inside the calculator's streaming passes.  A piston's momenta are fixed and
         # its forces were zeroed by adjust_forces, so setting them before the kick is the same.
-        fused = (self._own_forces and isinstance(self.calc, ClusterDynamics)
-                 and all(isinstance(c, Piston) for c in atoms.constraints))
+        pistons_only = all(isinstance(c, Piston) for c in atoms.constraints)
+        fused = self._own_forces and isinstance(self.calc, ClusterDynamics) and pistons_only
         res = None
         if fused:
             for c in atoms.constraints:
@@ -279,7 +279,7 @@ class DampedVerlet(MolecularDynamics):
             I.kick(p, self.forces, h)
             for c in atoms.constraints:
                 c.adjust_momenta(atoms, p)
-            if atoms.constraints and not all(isinstance(c, Piston) for c in atoms.constraints):
+            if not pistons_only:
                 new = atoms.positions + self.dt * p * invm[:, None]
                 atoms.set_positions(new)
                 v2 = (p * p).sum(axis=1) * invm ** 2
