@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from clusterdyn import units
+from clusterdyn.analysis.shock import shock_from_lammps
 from clusterdyn.io.lammps import (DEFAULT_TABLE_POINTS, export_lammps, frame_atoms, run_lammps,
-                                  shock_from_lammps, table_interpolation_error)
+                                  table_interpolation_error)
 from clusterdyn.scenes.shock import build_shock, run_shock
 
 HERE = Path(__file__).resolve().parent

@@ -151,7 +151,7 @@ def cmd_info(args):
 def cmd_export(args):
     if args.format != "lammps":
         raise InputError("format", args.format, "lammps")
-    from .io.lammps import export_scene
+    from .scenes.export import export_scene
     folder = export_scene(args.scene, _parse_sets(args.set), args.out)
     if not args.quiet:
         print(f"wrote LAMMPS deck to {folder}")

@@ -1,6 +1,6 @@
 """Binned profiles over a whole trajectory, as arrays ready to plot or write.
 
-:func:`trajectory_profiles` runs :func:`clusterdyn.analysis.stress.stress_profile`
+:func:`trajectory_profiles` runs :func:`clusterdyn.analysis.slabs.stress_profile`
 on every frame with one fixed set of slabs (:class:`ProfileRecorder`, also usable
 as an observer during a run), and stacks the results:
 ``stress[f, b, c]`` is component c (Voigt xx yy zz yz xz xy, lab frame) of
@@ -14,7 +14,8 @@ import numpy as np
 
 from .. import units
 from ..errors import InputError
-from .stress import VOIGT_NAMES, particle_virials, stress_profile
+from .slabs import stress_profile
+from .stress import VOIGT_NAMES, particle_virials
 
 
 def _frames(trajectory):
@@ -46,7 +47,7 @@ class ProfileRecorder:
     """Collect slab profiles frame by frame on one fixed set of slabs.
 
     ``add(atoms, virials, time)`` profiles one frame
-    (:func:`~clusterdyn.analysis.stress.stress_profile`); :meth:`arrays`
+    (:func:`~clusterdyn.analysis.slabs.stress_profile`); :meth:`arrays`
     stacks them into the dict :func:`trajectory_profiles` returns.  Use it
     from a dynamics observer when the run is not stored.
     """

@@ -6,75 +6,16 @@ and kinetic parts (kinetic part about the bin's mean velocity).  D is the
 lab-frame speed of the front into material at rest.
 """
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-
-def binned_profile(atoms, virials=None, axis=0, width=None, lo=None, hi=None, exclude=None):
-    """Profiles of density, velocity and stress in slabs normal to ``axis``.
-
-    Parameters
-    ----------
-    atoms : ase.Atoms
-        Periodic (or at least with a 3-D cell) across the two other axes; the
-        cross-section is the cell's.
-    virials : (N, 6) array, optional
-        Per-particle potential virials (Voigt xx yy zz yz xz xy, eV), e.g.
-        ``calc.get_property('virials', atoms)``.  Without them only the
-        kinetic part of the stress is returned.
-    width : float
-        Slab width, Angstrom.
-    lo, hi : float
-        Range along ``axis`` (default: the particles' extent).
-    exclude : bool mask, optional
-        Particles left out (e.g. a piston layer).
-
-    Returns
-    -------
-    dict with ``x`` (slab centres), ``count``, ``mass``, ``density`` (amu/A^3),
-    ``velocity`` ((nb, 3) mean velocity, A/time), ``stress`` ((nb, 6) virial +
-    kinetic, eV/A^3, tension positive, lab-frame Voigt xx yy zz yz xz xy),
-    ``pressure`` ((nb,) mean pressure ``-tr(stress)/3``), ``von_mises`` ((nb,)
-    stress intensity of CD eq. 4, :func:`clusterdyn.analysis.stress.von_mises`),
-    ``width``, ``area``.
-    """
-    pos = atoms.positions[:, axis]
-    m = atoms.get_masses()
-    v = atoms.get_velocities()
-    keep = np.ones(len(atoms), bool) if exclude is None else ~np.asarray(exclude, bool)
-    if lo is None:
-        lo = pos[keep].min()
-    if hi is None:
-        hi = pos[keep].max() + 1e-9 * max(1.0, abs(pos).max())
-    nb = max(1, int(np.ceil((hi - lo) / width)))
-    edges = lo + width * np.arange(nb + 1)
-    idx = np.floor((pos - lo) / width).astype(np.int64)
-    keep &= (idx >= 0) & (idx < nb)
-    idx = idx[keep]
-    mk, vk = m[keep], v[keep]
-    others = [d for d in range(3) if d != axis]
-    cell = atoms.cell.array
-    area = abs(np.linalg.det(cell[np.ix_(others, others)])) if atoms.cell.rank == 3 else np.nan
-    vol = area * width
-    count = np.bincount(idx, minlength=nb)
-    mass = np.bincount(idx, weights=mk, minlength=nb)
-    mom = np.stack([np.bincount(idx, weights=mk * vk[:, c], minlength=nb) for c in range(3)], axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        vel = mom / mass[:, None]
-    vel[mass == 0] = 0.0
-    dv = vk - vel[idx]
-    pairs = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
-    stress = np.zeros((nb, 6))
-    for c, (p, q) in enumerate(pairs):
-        stress[:, c] = -np.bincount(idx, weights=mk * dv[:, p] * dv[:, q], minlength=nb)
-        if virials is not None:
-            stress[:, c] += np.bincount(idx, weights=np.asarray(virials)[keep, c], minlength=nb)
-    stress /= vol
-    from .stress import pressure, von_mises      # (stress.py imports this module)
-    return {"x": 0.5 * (edges[1:] + edges[:-1]), "edges": edges, "count": count, "mass": mass,
-            "density": mass / vol, "velocity": vel, "stress": stress, "pressure": pressure(stress),
-            "von_mises": von_mises(stress), "width": width, "area": area}
+from .. import units
+from ..io.lammps import META_FILE, frame_atoms
+from .slabs import binned_profile
+from .stress import von_mises
 
 
 def front_position(x, u_axis, u_piston, fraction=0.5, support=0):
@@ -345,7 +286,6 @@ class ShockTracker:
         """
         if not self.frames:
             raise ValueError("no frames recorded")
-        from .stress import von_mises
         ax = self.axis
         lo = self.frames[0]["profile"]["edges"][0]
         hi = self.frames[0]["profile"]["edges"][-1]
@@ -521,3 +461,17 @@ def mixture_D(u, phases, closure="equal_u"):
         P_hi *= 2.0
     P = brentq(lambda P: mix(P)[0] - u, 1e-12 * P_hi, P_hi, xtol=1e-13 * P_hi)
     return float(mix(P)[1])
+
+
+def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo):
+    """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames."""
+    tracker = ShockTracker(rho0, u, slab, axis=0, lo=x_lo, hi=x_lo + length + slab)
+    dt_ps = None
+    meta = json.loads((Path(run.folder) / META_FILE).read_text())
+    dt_ps = meta["dt_ps"]
+    for fr in run.frames:
+        a, vir = frame_atoms(template, fr)
+        t = fr["step"] * dt_ps * units.PS
+        pist = a.positions[piston_mask, 0].max()
+        tracker.add(t, a, vir, pist, exclude=piston_mask)
+    return tracker, tracker.result()

@@ -24,7 +24,6 @@ from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from .shock import binned_profile
 
 #: Voigt component index -> Cartesian pair
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
@@ -146,26 +145,3 @@ def local_stress(atoms, radius, virials=None, centers=None):
     kin = np.stack([A @ (m * v[:, p] * v[:, q_]) - M * vbar[:, p] * vbar[:, q_] for p, q_ in VOIGT], axis=1)
     total = A @ W - kin
     return total / (4.0 / 3.0 * math.pi * radius ** 3)
-
-
-def stress_profile(atoms, width, virials=None, axis=0, lo=None, hi=None, exclude=None):
-    """Slab profile along ``axis`` of the six stress components and the intensity.
-
-    Wraps :func:`clusterdyn.analysis.shock.binned_profile` (slabs of ``width``
-    across the cell's cross-section, kinetic part about each slab's mean
-    velocity) and adds ``von_mises`` (nb,) and ``pressure`` (nb,).  Components
-    stay in the lab frame whatever ``axis`` is.
-
-    Returns
-    -------
-    dict
-        ``x`` (nb,), ``stress`` (nb, 6) eV/A^3, ``von_mises``, ``pressure``,
-        ``density``, ``velocity`` (nb, 3), ``count``, ``edges``, ``width``, ``area``.
-    """
-    if atoms.cell.rank != 3:
-        raise InputError("atoms.cell", atoms.cell, "a 3-D cell: its cross-section is the slab area")
-    W = particle_virials(atoms) if virials is None else virials
-    prof = binned_profile(atoms, W, axis=axis, width=width, lo=lo, hi=hi, exclude=exclude)
-    prof["von_mises"] = von_mises(prof["stress"])
-    prof["pressure"] = pressure(prof["stress"])
-    return prof

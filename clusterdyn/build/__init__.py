@@ -9,7 +9,7 @@ __all__ = ["fcc_packing", "fcc_sites", "make_cluster_atoms", "orientation_matrix
 from .polycrystal import grain_statistics, polycrystal, polycrystal_summary  # noqa: E402
 from .orientation import grain_orientation, misorientation_angle, misorientation_distribution  # noqa: E402
 __all__ += ["polycrystal", "polycrystal_summary", "grain_statistics", "grain_orientation", "misorientation_angle", "misorientation_distribution"]  # noqa: E501
-from ..mca.builders import mca_packing, precrack  # noqa: E402,F401
-__all__ += ["mca_packing", "precrack"]
+from .mca import mca_packing, notch, precrack  # noqa: E402,F401
+__all__ += ["mca_packing", "precrack", "notch"]
 from .two_phase import PAPER_CASES, two_phase  # noqa: E402
 __all__ += ["two_phase", "PAPER_CASES"]

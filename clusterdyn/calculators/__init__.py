@@ -1,7 +1,5 @@
-"""ASE calculators: Cluster Dynamics and Movable Cellular Automata."""
+"""ASE calculators: Cluster Dynamics (MCA's calculator is :class:`clusterdyn.mca.MCA`)."""
 
 from .cluster import ClusterDynamics, mark_initial_bonds
 
 __all__ = ["ClusterDynamics", "mark_initial_bonds"]
-from ..mca.calculator import MCA  # noqa: E402,F401
-__all__ += ["MCA"]

@@ -355,30 +355,6 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     return folder
 
 
-def export_scene(scene_name, overrides, out_dir, **kw):
-    """Build a scene's set-up from ``--set`` overrides and export it (``clusterdyn export lammps``).
-
-    Supported: ``shock``.  The deck runs the scene's full number of steps and
-    dumps frames for the front analysis (:func:`shock_from_lammps`).
-    """
-    from ..scenes import get_scene
-    scene = get_scene(scene_name)
-    if scene_name != "shock":
-        raise InputError("scene", scene_name, "a scene with a LAMMPS export: shock")
-    v = scene.parse(overrides)
-    from ..scenes.shock import build_shock
-    s = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
-                    v["noise"], v["seed"], v["dt_factor"])
-    if out_dir is None:
-        raise InputError("--out", None, "a folder for the LAMMPS deck")
-    extra = {"scene": "shock", "params": scene.display(v), "rho0_ase": float(s.material.rho0),
-             "u_ase": float(s.u), "slab_A": float(s.slab), "length_A": float(s.length),
-             "piston_mask_ids": (np.nonzero(s.piston_mask)[0] + 1).tolist(),
-             "x0_lo_A": float(s.atoms.positions[~s.piston_mask, 0].min())}
-    return export_lammps(s.atoms, s.calc, s.dyn, out_dir, nsteps=kw.pop("nsteps", s.nsteps),
-                         frames=kw.pop("frames", v["frames"]), extra=extra, **kw)
-
-
 # -- running -----------------------------------------------------------------------------------
 
 def _env_lib():
@@ -589,18 +565,3 @@ def frame_atoms(template, frame):
         vir = np.empty((len(a), 6))
         vir[rows] = s[:, [0, 1, 2, 5, 4, 3]]
     return a, vir
-
-
-def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo):
-    """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames."""
-    from ..analysis.shock import ShockTracker
-    tracker = ShockTracker(rho0, u, slab, axis=0, lo=x_lo, hi=x_lo + length + slab)
-    dt_ps = None
-    meta = json.loads((Path(run.folder) / META_FILE).read_text())
-    dt_ps = meta["dt_ps"]
-    for fr in run.frames:
-        a, vir = frame_atoms(template, fr)
-        t = fr["step"] * dt_ps * units.PS
-        pist = a.positions[piston_mask, 0].max()
-        tracker.add(t, a, vir, pist, exclude=piston_mask)
-    return tracker, tracker.result()

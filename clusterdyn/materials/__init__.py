@@ -7,4 +7,4 @@ from .library import (Hugoniot, Material, get_material, hugoniot, hugoniots, loa
 __all__ = ["ColdCurve", "MurnaghanCurve", "TabulatedCurve", "Material", "get_material",
            "hugoniot", "hugoniots", "Hugoniot", "load_al_table", "material_names",
            "register_material"]
-from ..mca import materials as _mca_materials  # noqa: E402,F401  (MCA library: alumina, concrete, Al6061, copper)
+from . import mca as _mca_materials  # noqa: E402,F401  (MCA library: alumina, concrete, Al6061, copper)

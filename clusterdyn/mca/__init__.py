@@ -1,27 +1,25 @@
-"""Movable Cellular Automata (MCA): calculator, dynamics, builders, response functions, scenes.
+"""Movable Cellular Automata (MCA): calculator, state, dynamics, response functions, kernels.
 
-physics.md section 2 gives the equations; docs/mca.md the choices we made.
+docs/theory.md (MCA sections) gives the equations; docs/mca.md the choices we made.
+The MCA method sits above the calculators and dynamics layers and shares them
+(neighbour lists, drives); nothing below it imports it.  Its pieces that belong
+to lower layers live there: the material library in :mod:`clusterdyn.materials.mca`,
+the builders in :mod:`clusterdyn.build.mca` (with the tessellation in
+:mod:`clusterdyn.build.tessellation`); its experiments and scenes in
+:mod:`clusterdyn.scenes`, its studies in :mod:`clusterdyn.studies`.
 
-Public API (also re-exported where ASE users look for them)::
+Public API::
 
-    from clusterdyn.calculators import MCA          # clusterdyn.mca.calculator.MCA
-    from clusterdyn.md import MCADynamics           # clusterdyn.mca.dynamics.MCADynamics
-    from clusterdyn.build import mca_packing, precrack
-
-Importing this package registers the MCA material library (alumina,
-concrete, Al6061, copper); :mod:`clusterdyn.materials` does so too.
-The heavier modules load on first attribute access (no import cycles with
-:mod:`clusterdyn.materials`).
+    from clusterdyn.mca import MCA, MCADynamics, MCAState
+    from clusterdyn.build import mca_packing, precrack, notch
+    from clusterdyn.materials.mca import mca_material
 """
 
 import importlib
 
-from . import materials  # noqa: F401  (registers the MCA material library)
-
 _LAZY = {
     "MCA": "calculator", "MCAState": "state", "MCADynamics": "dynamics", "Grip": "dynamics",
-    "default_timestep": "dynamics", "wave_speeds": "dynamics", "mca_packing": "builders",
-    "precrack": "builders", "notch": "builders", "mca_material": "materials",
+    "default_timestep": "dynamics", "wave_speeds": "dynamics",
 }
 
 __all__ = sorted(_LAZY)

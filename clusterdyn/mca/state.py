@@ -23,9 +23,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials import get_material
-from .geometry import tessellate
+from ..build.tessellation import tessellate
 from .kernels import incidence
-from .materials import check_mca_material
+from ..materials.mca import check_mca_material
 from .response.plastic import hardening_table
 
 #: per-pair arrays that are history (checkpointed); the rest are set-up constants (also checkpointed)

@@ -4,5 +4,3 @@ from .boundaries import Piston, RigidWall
 from .damped import DampedVerlet, default_timestep, pair_stability_limit, stability_limit
 
 __all__ = ["DampedVerlet", "Piston", "RigidWall", "default_timestep", "pair_stability_limit", "stability_limit"]
-from ..mca.dynamics import MCADynamics  # noqa: E402,F401
-__all__ += ["MCADynamics"]

@@ -8,6 +8,7 @@ writes it as JSON beside the H5MD file.
 """
 
 import dataclasses
+import importlib
 import json
 import math
 import re
@@ -328,9 +329,19 @@ def register(name, description, params):
     return deco
 
 
+#: scene modules, imported on first use (each adds its scenes to SCENES)
+SCENE_MODULES = ["shock", "plate_impact", "mca"]
+
+
+def all_scenes():
+    """Every registered scene (imports the scene modules on first use)."""
+    for m in SCENE_MODULES:
+        importlib.import_module(f"{__package__}.{m}")
+    return SCENES
+
+
 def get_scene(name):
-    from . import _load_all  # noqa: F401  (import scene modules)
-    _load_all()
+    all_scenes()
     if name not in SCENES:
         raise InputError("scene", name, "one of " + ", ".join(sorted(SCENES)))
     return SCENES[name]

@@ -15,6 +15,9 @@ convergence    error of D against the experiment and the finest run, versus wall
                time and particle-steps, over sample size, time step, cutoff,
                noise and r0
 stability      the measured time-step limit (bounded energy error) for u = 0-8 km/s
+mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, hcp,
+               sc and random packings) and the Cluster Dynamics contrast
+mca-degrading  a load / unload / reload cycle of a degrading MCA material
 =============  =================================================================
 """
 
@@ -27,6 +30,8 @@ STUDIES = {
     "hugoniot": "hugoniot:hugoniot_study",
     "convergence": "convergence:convergence_study",
     "stability": "stability:stability_study",
+    "mca-elasticity": "mca:elasticity_study",
+    "mca-degrading": "mca:degrading_study",
 }
 
 

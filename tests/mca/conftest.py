@@ -1,6 +1,6 @@
 import pytest
 
-from clusterdyn.mca.studies import elastic_material
+from clusterdyn.studies.mca import elastic_material
 
 
 @pytest.fixture

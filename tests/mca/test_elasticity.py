@@ -5,7 +5,7 @@ The full 20-case table: ``python -m clusterdyn.mca.studies elasticity`` (docs/mc
 
 import pytest
 
-from clusterdyn.mca.studies import elastic_case, _err
+from clusterdyn.studies.mca import elastic_case, _err
 
 CASES = [("fcc", 0.25), ("hcp", 0.45), ("sc", 0.0), ("random", 0.35), ("fcc", 0.45), ("sc", 0.15)]
 

@@ -5,11 +5,11 @@ import pytest
 
 from clusterdyn.errors import InputError, InstabilityError
 from clusterdyn.materials import get_material
-from clusterdyn.mca.builders import mca_packing
+from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics, default_timestep
-from clusterdyn.mca.materials import mca_material
-from clusterdyn.mca.studies import elastic_material
+from clusterdyn.materials.mca import mca_material
+from clusterdyn.studies.mca import elastic_material
 
 
 def test_library_through_get_material():

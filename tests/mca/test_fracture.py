@@ -3,7 +3,7 @@
 import numpy as np
 
 from clusterdyn.materials import get_material
-from clusterdyn.mca.experiments import fragments, uniaxial
+from clusterdyn.scenes.mca_experiments import fragments, uniaxial
 
 
 def test_tension_peak_and_two_parts():

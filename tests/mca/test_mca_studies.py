@@ -9,7 +9,7 @@ import pytest
 
 from clusterdyn import units
 from clusterdyn.materials import get_material
-from clusterdyn.mca.studies import (cd_elastic_constants, cubic_stiffness, degrading_cycle,
+from clusterdyn.studies.mca import (cd_elastic_constants, cubic_stiffness, degrading_cycle,
                                     rotate_stiffness, uniaxial_moduli)
 
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from clusterdyn.mca.builders import mca_packing
+from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics
-from clusterdyn.mca.studies import elastic_material
+from clusterdyn.studies.mca import elastic_material
 
 
 @pytest.mark.parametrize("packing", ["hex", "sc", "random"])

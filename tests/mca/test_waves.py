@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.special import erf
 
-from clusterdyn.mca.builders import mca_packing
+from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics, wave_speeds
-from clusterdyn.mca.studies import elastic_material
+from clusterdyn.studies.mca import elastic_material
 
 
 def pulse_speed(packing, mode, nu=0.25, L=40.0, w=5.0):

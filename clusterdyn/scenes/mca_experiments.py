@@ -12,9 +12,9 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .builders import mca_packing
-from .calculator import MCA
-from .dynamics import Grip, MCADynamics, wave_speeds
+from ..build.mca import mca_packing
+from ..mca.calculator import MCA
+from ..mca.dynamics import Grip, MCADynamics, wave_speeds
 
 
 def broken_links(state, npairs0):

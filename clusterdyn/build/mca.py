@@ -30,8 +30,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError, check_positive
 from ..materials import get_material
-from .geometry import tessellate
-from .materials import check_mca_material
+from .tessellation import tessellate
+from ..materials.mca import check_mca_material
 
 PACKINGS_3D = ("fcc", "hcp", "sc", "random")
 PACKINGS_2D = ("hex", "sc", "random")

@@ -1,15 +1,15 @@
 """MCA studies: the packing-independent elasticity table, its Cluster Dynamics contrast, the
 degrading unload-reload cycle (and helpers the tests reuse).
 
-    python -m clusterdyn.mca.studies elasticity [--out DIR] [--size L]
-    python -m clusterdyn.mca.studies degrading [--out DIR]
+    clusterdyn study mca-elasticity [--set size=L] [--out DIR]
+    clusterdyn study mca-degrading [--set steps=N] [--out DIR]
 
 ``elasticity`` prints the table of Young's modulus, Poisson ratio, bulk and
 shear modulus measured on fcc, hcp, simple cubic and random packings for
 nu in {0, 0.15, 0.25, 0.35, 0.45} against the input, then the same test on a
 Cluster Dynamics fcc packing of aluminium along [100] and [111] against the
 nearest-neighbour central-force values (physics.md 1.5), and writes both as
-CSV and Markdown under ``DIR`` (default ``out/mca``).  ``degrading`` runs a
+CSV and Markdown under ``DIR`` (default ``runs/mca-elasticity-size5``).  ``degrading`` runs a
 load / unload / reload cycle of concrete and writes the curve (CSV, PNG) with
 the fitted initial and unloading moduli.
 
@@ -42,7 +42,6 @@ site a centre of inversion), so the affine field is the equilibrium and no
 relaxation is needed.  Central differences, ``+-strain``.
 """
 
-import argparse
 import csv
 import math
 import sys
@@ -52,11 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from .. import units
+from ..scenes.base import Param
 from ..analysis.stress import VOIGT
-from .builders import mca_packing
-from .calculator import MCA
-from .dynamics import Grip, MCADynamics
-from .materials import mca_material
+from ..build.mca import mca_packing
+from ..mca.calculator import MCA
+from ..mca.dynamics import Grip, MCADynamics
+from ..materials.mca import mca_material
+from .common import out_folder, parse_params
 
 PACKINGS = ("fcc", "hcp", "sc", "random")
 NUS = (0.0, 0.15, 0.25, 0.35, 0.45)
@@ -394,7 +395,7 @@ def degrading_cycle(material="concrete", size=(16, 5, 5), steps=6000, peak=0.95,
     ``stress_at_zero_strain`` (end of unloading), ``D_mean`` and the material.
     """
     from ..materials import get_material
-    from .experiments import uniaxial
+    from ..scenes.mca_experiments import uniaxial
 
     mat = get_material(material)
     em = peak * mat.sigma_t / mat.E
@@ -478,23 +479,44 @@ def _plot_cycle(res, path):
     return Path(path)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m clusterdyn.mca.studies")
-    ap.add_argument("study", choices=["elasticity", "degrading"])
-    ap.add_argument("--out", default="out/mca")
-    ap.add_argument("--size", type=float, default=5.0, help="elasticity: box edge in automaton sizes")
-    ap.add_argument("--steps", type=int, default=6000, help="degrading: steps of the whole cycle")
-    a = ap.parse_args(argv)
-    if a.study == "elasticity":
-        elasticity_table(size=a.size, out=a.out)
-        print()
-        _, cd_text = cd_contrast_table(out=a.out)
-        md = Path(a.out) / "elasticity.md"
-        md.write_text(md.read_text() + "\nCluster Dynamics contrast (same test, pair potential):\n\n"
-                      + cd_text + "\n")
-    elif a.study == "degrading":
-        degrading_cycle(steps=a.steps, out=a.out)
+ELASTICITY_PARAMS = [
+    Param("size", 5.0, "box edge of the elasticity samples in automaton sizes", low=2.0),
+    Param("material", "Al", "Cluster Dynamics material of the contrast", kind="str"),
+]
+DEGRADING_PARAMS = [
+    Param("material", "concrete", "degrading MCA material", kind="str"),
+    Param("steps", 6000, "steps of the whole load-unload-reload cycle", kind="int", low=100),
+    Param("peak", 0.95, "peak strain as a fraction of sigma_t/E", low=0.0, high=1.0, low_open=True),
+    Param("damping", 0.1, "viscous damping of relative pair velocity", low=0.0),
+]
 
 
-if __name__ == "__main__":
-    main()
+def elasticity_study(overrides=None, out=None, progress=True, quiet=None):
+    """``clusterdyn study mca-elasticity``: the packing-independence table and its CD contrast."""
+    quiet = (not progress) if quiet is None else quiet
+    v, _ = parse_params(ELASTICITY_PARAMS, overrides, study="mca-elasticity")
+    t0 = time.perf_counter()
+    folder = out_folder(out, "mca-elasticity", f"size{v['size']:g}")
+    stream = None if quiet else sys.stdout
+    rows = elasticity_table(size=v["size"], out=folder, stream=stream)
+    cd_rows, cd_text = cd_contrast_table(material=v["material"], out=folder, stream=stream)
+    md = folder / "elasticity.md"
+    md.write_text(md.read_text() + "\nCluster Dynamics contrast (same test, pair potential):\n\n"
+                  + cd_text + "\n")
+    return {"study": "mca-elasticity", "rows": rows, "cd_rows": cd_rows, "files": [str(md)],
+            "wall_time_s": time.perf_counter() - t0}
+
+
+def degrading_study(overrides=None, out=None, progress=True, quiet=None):
+    """``clusterdyn study mca-degrading``: a load / unload / reload cycle of a degrading material."""
+    quiet = (not progress) if quiet is None else quiet
+    v, _ = parse_params(DEGRADING_PARAMS, overrides, study="mca-degrading")
+    folder = out_folder(out, "mca-degrading", v["material"])
+    res = degrading_cycle(v["material"], steps=v["steps"], peak=v["peak"], damping=v["damping"],
+                          out=folder, stream=None if quiet else sys.stdout)
+    keep = ("E_initial", "E_unloading", "E_reloading", "peak_stress", "stress_at_zero_strain", "D_mean",
+            "strain_max", "seconds")
+    out_d = {k: res[k] for k in keep}
+    out_d.update({"study": "mca-degrading", "material": res["material"].name,
+                  "files": [str(folder / "degrading_cycle.csv"), str(res["png"])]})
+    return out_d

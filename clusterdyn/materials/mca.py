@@ -22,7 +22,7 @@ MCA-specific parameters live in ``Material.extra``:
 
 from .. import units
 from ..errors import InputError
-from ..materials.library import Material, register_material
+from .library import Material, register_material
 
 #: names of the response functions (MCA Fig. 3)
 RESPONSES = ("elastic", "elastic-brittle", "degrading", "elastic-plastic", "plastic-degrading")
