@@ -227,6 +227,10 @@ class ShockTracker:
             t.X0 = np.asarray(st["X0"], float)
         return t
 
+    def set_state(self, st):
+        """Resume from :meth:`get_state` (in place)."""
+        self.__dict__.update(type(self).from_state(st).__dict__)
+
     def add(self, time, atoms, virials, piston_x, exclude=None):
         """Record one frame; returns the front position (nan if none)."""
         ax = self.axis

@@ -1,10 +1,10 @@
 """Builders: ASE Atoms of clusters and automata."""
 
 from .lattice import (ORIENTATIONS, fcc_packing, fcc_sites, make_cluster_atoms, orientation_matrix,
-                      parse_direction, repeat_lengths)
+                      along_axis, parse_axis, parse_direction, repeat_lengths)
 from .shapes import Box, Cylinder, Plate, Sphere
 
-__all__ = ["fcc_packing", "fcc_sites", "make_cluster_atoms", "orientation_matrix", "parse_direction",
+__all__ = ["along_axis", "parse_axis", "fcc_packing", "fcc_sites", "make_cluster_atoms", "orientation_matrix", "parse_direction",
            "repeat_lengths", "ORIENTATIONS", "Box", "Cylinder", "Plate", "Sphere"]
 from .polycrystal import grain_statistics, polycrystal, polycrystal_summary  # noqa: E402
 from .orientation import grain_orientation, misorientation_angle, misorientation_distribution  # noqa: E402

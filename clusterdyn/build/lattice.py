@@ -179,3 +179,33 @@ def fcc_packing(material, r0, size=(4, 4, 4), direction=(1, 0, 0), pbc=False, sh
     atoms = make_cluster_atoms(pos[order], [mat], [r0], cell=cell, pbc=pbc)
     atoms.info["direction"] = key
     return atoms
+
+
+def along_axis(atoms, axis):
+    """Turn a sample built along x so that its x axis lies along ``axis`` (0, 1, 2 or x, y, z).
+
+    A cyclic permutation of the coordinates (x -> axis, y -> axis+1, ...), so
+    the handedness and the crystal orientation relative to the new axis are
+    kept; positions, momenta, cell and pbc are permuted in place and the
+    Atoms is returned.  ``atoms.info['axis']`` records the axis.
+    """
+    ax = parse_axis(axis)
+    if ax:
+        inv = (np.arange(3) - ax) % 3             # new column j <- old column j - axis
+        p = atoms.get_momenta() if "momenta" in atoms.arrays else None
+        atoms.positions = atoms.positions[:, inv]
+        atoms.set_cell(atoms.cell.array[np.ix_(inv, inv)], scale_atoms=False)
+        atoms.pbc = np.asarray(atoms.pbc)[inv]
+        if p is not None:
+            atoms.set_momenta(p[:, inv], apply_constraint=False)
+    atoms.info["axis"] = "xyz"[ax]
+    return atoms
+
+
+def parse_axis(axis):
+    """0, 1, 2 or 'x', 'y', 'z' -> 0, 1, 2 (InputError otherwise)."""
+    if isinstance(axis, str) and axis.strip().lower() in ("x", "y", "z"):
+        return "xyz".index(axis.strip().lower())
+    if isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and 0 <= int(axis) <= 2:
+        return int(axis)
+    raise InputError("axis", axis, "x, y or z (or 0, 1, 2)")

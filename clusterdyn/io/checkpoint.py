@@ -43,7 +43,7 @@ import numpy as np
 from clusterdyn.errors import InputError
 from clusterdyn.io._common import clusterdyn_version, open_h5_read
 
-__all__ = ["write_checkpoint", "read_checkpoint", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["write_checkpoint", "read_checkpoint", "save_run", "load_run", "read_run_extra", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "clusterdyn-checkpoint"
 FORMAT_VERSION = 1
@@ -382,3 +382,23 @@ def read_checkpoint(path):
     finally:
         f.close()
     return atoms, state
+
+
+def save_run(path, dyn, extra=None):
+    """Write the full state of a run (Atoms, dynamics, drives, calculator set-up) and ``extra``."""
+    return dyn.checkpoint(path, extra=extra)
+
+
+def load_run(path):
+    """``(atoms, dyn, extra)`` of a run saved by :func:`save_run`."""
+    from ..md import DampedVerlet
+    return DampedVerlet.restart(path)
+
+
+def read_run_extra(path):
+    """The ``extra`` dict of a run checkpoint (the caller's state: scene, parameters, analysis)."""
+    _, state = read_checkpoint(path)
+    extra = state.get("extra") if isinstance(state, dict) else None
+    if not isinstance(extra, dict):
+        raise InputError("--restart", os.fspath(path), "a checkpoint written by a clusterdyn run")
+    return extra

@@ -41,6 +41,7 @@ class Param:
     high: float = None
     low_open: bool = False     # exclude `low` itself
     optional: bool = False     # None allowed ("none"/"off")
+    restart: bool = False      # a --set on --restart may change it (run length, output cadence)
 
     def describe(self):
         d = self.default
@@ -55,7 +56,8 @@ class Param:
             lo = "" if self.low is None else ("(" if self.low_open else "[") + f"{self.low:g}"
             hi = "" if self.high is None else f"{self.high:g}]"
             rng = f" range {lo or '(-inf'}, {hi or 'inf)'}"
-        return f"{self.name} = {dtxt}  -- {self.doc}{rng}"
+        tag = "  [may change on --restart]" if self.restart else ""
+        return f"{self.name} = {dtxt}  -- {self.doc}{rng}{tag}"
 
     def _check_range(self, v, text):
         if self.low is not None and (v < self.low or (self.low_open and v == self.low)):
@@ -319,6 +321,12 @@ class Scene:
 
 
 SCENES = {}
+
+
+def register_scene(scene):
+    """Register a :class:`~clusterdyn.scenes.lifecycle.SceneDef` instance under its name."""
+    SCENES[scene.name] = scene
+    return scene
 
 
 def register(name, description, params):

@@ -20,16 +20,20 @@ def thermal_noise(atoms, rms, seed, exclude=None):
     atoms.set_velocities(atoms.get_velocities() + v)
 
 
+#: set once a run in this process has taken a step (numba kernels compiled or loaded from the cache)
+_STEPPED = []
+
+
 def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkpoint=None,
-               checkpoint_every=0, get_extra=None):
+               checkpoint_every=0, save=None):
     """Run up to step ``nsteps``, calling ``on_frame(dyn)`` every ``nsteps/nframes`` steps.
 
     The frame at step 0 is taken unless the dynamics is resumed (``dyn.nsteps > 0``:
     a restart continues after its last frame).  Every ``checkpoint_every``
-    frames (0 = never) the full state goes to ``checkpoint`` with
-    ``get_extra()`` (the caller's analysis state) beside it.  Shows one tqdm
-    bar over all steps with time left when ``progress``.  Returns the wall
-    time of the stepping alone.
+    frames (0 = never) ``save(checkpoint)`` writes the full state.  Shows one
+    tqdm bar over all steps with time left when ``progress``; the first step of
+    a process says "compiling kernels, first run only" while numba compiles
+    (or loads its on-disk cache).  Returns the wall time of the stepping alone.
     """
     every = max(1, int(round(nsteps / max(1, nframes))))
     bar = None
@@ -45,15 +49,28 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
         while done < nsteps:
             k = min(every - done % every, nsteps - done)
             t0 = time.perf_counter()
-            dyn.run(k)
+            if not _STEPPED and k > 1:
+                if bar is not None:
+                    bar.set_description_str(f"{desc} (compiling kernels, first run only)")
+                dyn.run(1)
+                _STEPPED[:1] = [True]
+                if bar is not None:
+                    bar.set_description_str(desc)
+                    bar.update(1)
+                dyn.run(k - 1)
+                if bar is not None:
+                    bar.update(k - 1)
+            else:
+                dyn.run(k)
+                _STEPPED[:1] = [True]
+                if bar is not None:
+                    bar.update(k)
             t_run += time.perf_counter() - t0
             done += k
-            if bar is not None:
-                bar.update(k)
             on_frame(dyn)
             nframe += 1
             if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
-                dyn.checkpoint(checkpoint, extra=get_extra() if get_extra else None)
+                save(checkpoint)
     finally:
         if bar is not None:
             bar.close()

@@ -25,7 +25,6 @@ keys the scene marks ``restart=True`` (run length, output cadence), any
 other key is refused, and ``result.json`` records what actually ran.
 """
 
-import dataclasses
 import math
 import os
 import time
@@ -341,4 +340,4 @@ def scene_params(params, *, frames=None, h5md_frames=20, checkpoint_every=10):
     return list(params) + [p for p in common if p.name not in own]
 
 
-__all__ = ["Stage", "SceneDef", "check_out", "scene_params", "CHECKPOINT", "dataclasses"]
+__all__ = ["Stage", "SceneDef", "check_out", "scene_params", "CHECKPOINT"]

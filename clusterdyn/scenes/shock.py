@@ -16,24 +16,26 @@ import numpy as np
 
 from .. import units
 from ..analysis.shock import ShockTracker
-from ..build import fcc_packing, repeat_lengths
+from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError, InstabilityError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet, default_timestep
 from ..md.damped import TIMESTEP_FACTOR
-from .base import Param, Quantity, SceneResult, register
+from .base import Param, Quantity, register_scene
 from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
+from .lifecycle import SceneDef, Stage, scene_params
 
 CD_MATERIALS = ("Al", "Pb", "B4C", "h-BN")
 
 PARAMS = [
     Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
     Param("u", 3.0, "piston speed", unit="km/s", low=0.0, high=20.0, low_open=True),
-    Param("direction", "100", "crystal direction along the shock (x)", kind="choice",
+    Param("direction", "100", "crystal direction along the shock", kind="choice",
           choices=("100", "110", "111")),
-    Param("size", (100, 8, 8), "repeat cells along x, y, z (x = shock direction)", kind="ints"),
+    Param("size", (100, 8, 8), "repeat cells along the shock and across it (the first is along the shock)",
+          kind="ints"),
     Param("r0", 5.0, "cluster size", unit="um", low=0.0, low_open=True),
     Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
     Param("J", None, "damping Gamma = c0/(J r0); none = off (shock Hugoniots run undamped)",
@@ -43,10 +45,9 @@ PARAMS = [
     Param("dt_factor", TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + u) (of r0/(c_s/2 + u) for "
           "stiff cold curves, c_s the sound speed at the shock's compression)", low=0.0,
           high=0.5, low_open=True),
+    Param("axis", "x", "shock direction (the sample is free along it and periodic across)", kind="choice",
+          choices=("x", "y", "z")),
     Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
-    Param("h5md", True, "write an H5MD trajectory (with --out)", kind="bool"),
-    Param("h5md_frames", 20, "trajectory frames written to the H5MD file", kind="int", low=1),
-    Param("checkpoint_every", 10, "frames between checkpoints (with --out; 0 = none)", kind="int", low=0),
     Param("dt_retries", 2, "times the run starts again with half the time step when the dynamics' "
           "stiffness check stops it (0: stop with InstabilityError)", kind="int", low=0),
     Param("attraction", "all", "'initial': only pairs bonded at set-up attract, later contacts only repel "
@@ -74,6 +75,7 @@ class ShockSetup:
     rest_volume: object = None      #: (N,) volume of each cluster at rest (two-phase samples)
     rho0: float = None              #: mean density at rest (default material.rho0)
     two_phase: dict = None          #: atoms.info['two_phase'] of a two-phase sample
+    axis: int = 0                   #: shock direction (0, 1, 2)
 
 
 #: the time step follows r0/(c0 + u) until the sound speed at the shock's compression exceeds
@@ -158,7 +160,7 @@ def _d_guess(name, u, c0):
 def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 8), r0=5 * units.um,
                 rc=1.15, J=None, noise=10 * units.m_s, seed=1, dt_factor=TIMESTEP_FACTOR,
                 run_fraction=0.8, attraction="all", inclusion=None, inclusion_fraction=0.28,
-                inclusion_diameter=56 * units.um, r0_inclusion=None):
+                inclusion_diameter=56 * units.um, r0_inclusion=None, axis=0):
     """Sample, calculator, piston and dynamics of a piston shock (ASE units).
 
     ``attraction="initial"`` marks the set-up bonds (before the noise) and
@@ -166,8 +168,12 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     (:func:`clusterdyn.build.two_phase`: ``material`` is the matrix,
     ``inclusion_fraction`` the inclusions' mass fraction, placement seeded by
     ``seed``).  The time step is :func:`shock_timestep`
-    (``dt_factor * r0/(c0 + u)`` but for stiff cold curves).
+    (``dt_factor * r0/(c0 + u)`` but for stiff cold curves).  ``axis`` (0, 1,
+    2 or x, y, z) is the shock direction: the sample is built with
+    ``direction`` along x and turned so that x lies along ``axis``
+    (:func:`clusterdyn.build.along_axis`); it is free along ``axis`` and periodic across.
     """
+    axis = parse_axis(axis)
     mat = get_material(material)
     if mat.curve is None:
         raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
@@ -182,6 +188,7 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
         atoms = two_phase(mat, inclusion, inclusion_fraction, inclusion_diameter, r0=r0, size=size,
                           direction=direction, pbc=(False, True, True), seed=seed, r0_inclusion=r0_inclusion)
         info = atoms.info["two_phase"]
+    along_axis(atoms, axis)
     calc = ClusterDynamics(rc=rc, attraction=attraction)
     if attraction == "initial":
         mark_initial_bonds(atoms, rc)
@@ -189,13 +196,13 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     calc.setup(atoms)
     pot = calc.potentials[0]
     # piston: the first 1.5 r0 (at least two atomic planes in every orientation)
-    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u)
+    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u, axis)
     thermal_noise(atoms, noise, seed, exclude=mask)
     atoms.set_constraint(piston)
     atoms.set_momenta(atoms.get_momenta())            # applies the piston velocity
     dt = shock_timestep(calc, u, dt_factor)
     dyn = DampedVerlet(atoms, timestep=dt, J=J)
-    length = atoms.positions[:, 0].max() - atoms.positions[:, 0].min()
+    length = np.ptp(atoms.positions[:, axis])
     vrest = rest_volumes(atoms)
     rho0 = float(atoms.get_masses().sum() / vrest.sum())
     if info is None:
@@ -208,57 +215,40 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     nsteps = int(math.ceil(t_end / dt))
     # slab width: one repeat length along x for [100] (two planes), at least r0
     slab = max(float(repeat_lengths(direction, r0)[0]), r0)
-    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info)
+    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info, axis)
 
 
-def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", checkpoint=None,
-              checkpoint_every=0, tracker=None, params=None):
+def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", tracker=None):
     """Run a built shock, tracking the front; returns (ShockTracker, ShockState, stepping wall time).
 
-    With ``checkpoint`` the state (and the tracker's frames) is saved every
-    ``checkpoint_every`` frames; pass the restored ``tracker`` to resume.
+    The library form of the ``shock`` scene's run (no files, no checkpoints: the
+    scene's lifecycle adds those).
     """
     atoms, calc = setup.atoms, setup.calc
     if tracker is None:
-        x0 = atoms.positions[~setup.piston_mask, 0].min()
-        rho0 = setup.material.rho0 if setup.rho0 is None else setup.rho0
-        tracker = ShockTracker(rho0, setup.u, setup.slab, axis=0, lo=x0,
-                               hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume)
+        tracker = shock_tracker(setup, atoms.positions[~setup.piston_mask, setup.axis].min())
 
     def frame(dyn):
         out = calc.compute(atoms, per_particle=True)
-        pist = atoms.positions[setup.piston_mask, 0].max()
+        pist = atoms.positions[setup.piston_mask, setup.axis].max()
         tracker.add(dyn.get_time(), atoms, out["virials"], pist, exclude=setup.piston_mask)
         if on_frame is not None:
             on_frame(dyn)
 
-    def extra():
-        return {"tracker": tracker.get_state(), "params": params or {}, "nsteps_total": setup.nsteps,
-                "slab": setup.slab, "length": setup.length}
-
-    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc,
-                       checkpoint=checkpoint, checkpoint_every=checkpoint_every, get_extra=extra)
+    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc)
     return tracker, tracker.result(), t_run
 
 
-def restore_shock(path):
-    """Rebuild a ShockSetup and its tracker from a shock checkpoint."""
-    atoms, dyn, extra = DampedVerlet.restart(path)
-    try:
-        p = extra["params"]
-        tracker = ShockTracker.from_state(extra["tracker"])
-    except (KeyError, TypeError):
-        raise InputError("--restart", str(path), "a checkpoint written by the shock scene") from None
-    piston = atoms.constraints[0]
-    mask = np.zeros(len(atoms), bool)
-    mask[piston.index] = True
-    setup = ShockSetup(atoms, atoms.calc, dyn, piston, mask, int(extra["nsteps_total"]),
-                       float(extra["slab"]), float(extra["length"]), get_material(p["material"]),
-                       float(np.linalg.norm(piston.velocity)))
-    return setup, tracker, p
+def shock_tracker(setup, x0):
+    """The front tracker of a shock set-up, its slabs from ``x0`` (the sample's start) on."""
+    rho0 = setup.material.rho0 if setup.rho0 is None else setup.rho0
+    return ShockTracker(rho0, setup.u, setup.slab, axis=setup.axis, lo=x0,
+                        hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume)
 
 
-def plot_shock(tracker, state, path, title=""):
+def plot_shock(tracker, state, path, title="", u=None, P_ref=None):
+    """x-t diagram and velocity and stress profiles (legend: the frames' times; dashed: u and the
+    reference rho0 D u when given)."""
     plt = matplotlib_agg()
     fig, axs = plt.subplots(1, 3, figsize=(14, 4.2))
     t = np.array([f["t"] for f in tracker.frames]) / units.ns
@@ -274,17 +264,26 @@ def plot_shock(tracker, state, path, title=""):
         axs[0].plot(tt, np.polyval(A, tt), "k--", lw=0.8,
                     label=f"D = {state.D_fit / units.km_s:.3f} km/s")
     axs[0].set_xlabel("t (ns)")
-    axs[0].set_ylabel("x (um)")
+    axs[0].set_ylabel(f"{'xyz'[tracker.axis]} (um)")
     axs[0].legend()
     axs[0].set_title("x-t diagram")
+    ax = tracker.axis
     for f in tracker.frames[:: max(1, len(tracker.frames) // 6)]:
         p = f["profile"]
-        axs[1].plot(p["x"] / units.um, p["velocity"][:, 0] / units.km_s, lw=1)
-        axs[2].plot(p["x"] / units.um, -p["stress"][:, 0] / units.GPa, lw=1)
-    axs[1].set_xlabel("x (um)")
-    axs[1].set_ylabel("particle velocity u_x (km/s)")
-    axs[2].set_xlabel("x (um)")
-    axs[2].set_ylabel("longitudinal stress -sigma_xx (GPa)")
+        lab = f"t = {f['t'] / units.ns:.3g} ns"
+        axs[1].plot(p["x"] / units.um, p["velocity"][:, ax] / units.km_s, lw=1, label=lab)
+        axs[2].plot(p["x"] / units.um, -p["stress"][:, ax] / units.GPa, lw=1, label=lab)
+    if u is not None:
+        axs[1].axhline(u / units.km_s, color="k", ls="--", lw=0.8, label=f"piston u = {u / units.km_s:g} km/s")
+    if P_ref is not None:
+        axs[2].axhline(P_ref, color="k", ls="--", lw=0.8, label=f"rho0 D u (experiment) = {P_ref:.3g} GPa")
+    axs[1].legend(fontsize=7)
+    axs[2].legend(fontsize=7)
+    c = "xyz"[ax]
+    axs[1].set_xlabel(f"{c} (um)")
+    axs[1].set_ylabel(f"particle velocity u_{c} (km/s)")
+    axs[2].set_xlabel(f"{c} (um)")
+    axs[2].set_ylabel(f"longitudinal stress -sigma_{c}{c} (GPa)")
     axs[1].set_title("velocity profiles")
     axs[2].set_title("stress profiles")
     fig.suptitle(title)
@@ -332,115 +331,151 @@ def shock_quantities(state, mat, u, reference=True):
     return q, ref
 
 
-def _shock_attempt(v, dt_factor, out, progress, restart):
-    """Build (or restore) and run one shock; returns (setup, tracker, state, t_run, files, v)."""
-    tracker = None
-    if restart is not None:
-        setup, tracker, stored = restore_shock(restart)
-        v = {**v, **{k: (tuple(x) if isinstance(x, list) else x) for k, x in stored.items()}}
-    else:
-        setup = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"],
-                            v["noise"], v["seed"], dt_factor, attraction=v.get("attraction", "all"),
-                            inclusion=v.get("inclusion"),
-                            inclusion_fraction=v.get("inclusion_fraction", 0.28),
-                            inclusion_diameter=v.get("inclusion_diameter", 56 * units.um))
-    writer = None
-    files = []
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)       # checkpoints go there even without H5MD
-    if out is not None and v["h5md"]:
-        try:
-            from ..io import H5MDWriter
-        except ImportError:
-            H5MDWriter = None
-        if H5MDWriter is not None:
-            path = out / "shock.h5md"
-            # the reaction of the sample on the piston (x component), and the pressure it implies
-            area = setup.atoms.cell[1, 1] * setup.atoms.cell[2, 2]
-            obs = {"piston_force": (lambda a: -setup.piston.force[0] / units.N, "N"),
-                   "piston_pressure": (lambda a: -setup.piston.force[0] / area / units.GPa, "GPa")}
-            if restart is not None and path.exists():
-                writer = H5MDWriter(str(path), setup.atoms, mode="a", dyn=setup.dyn, parameters=v,
-                                    restart_step=setup.dyn.nsteps, observables=obs)
-            else:
-                writer = H5MDWriter(str(path), setup.atoms, dyn=setup.dyn, parameters=v, observables=obs)
-            setup.dyn.attach(writer, interval=max(1, setup.nsteps // v["h5md_frames"]))
-            files.append(path)
-    try:
-        ckpt = (out / "checkpoint.h5") if (out is not None and v["checkpoint_every"]) else None
-        tracker, state, t_run = run_shock(setup, v["frames"], progress, checkpoint=ckpt,
-                                          checkpoint_every=v["checkpoint_every"], tracker=tracker,
-                                          params=v)
-    finally:
-        if writer is not None:
-            writer.close()
-    return setup, tracker, state, t_run, files, v
 
 
-@register("shock", "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot",
-          PARAMS)
-def shock_scene(v, out=None, progress=True, restart=None):
-    t0 = time.perf_counter()
-    retried = []
-    factor = v["dt_factor"]
-    attempts = 1 if restart is not None else 1 + int(v.get("dt_retries", 0))
-    for attempt in range(attempts):
-        try:
-            setup, tracker, state, t_run, files, v = _shock_attempt(v, factor, out, progress, restart)
-            break
-        except InstabilityError as exc:
-            if exc.quantity != "timestep" or attempt == attempts - 1:
-                raise
-            retried.append(f"dt factor {factor:g}: stopped at step {exc.step} by the stiffness check "
-                           f"(closest pair {exc.particles}, timestep {exc.value:.4g} > limit {exc.limit:.4g})")
-            factor *= 0.5
-    two = setup.two_phase
-    q, ref = shock_quantities(state, setup.material, setup.u, reference=two is None)
-    n = len(setup.atoms)
-    pot = setup.calc.potentials[0]
-    notes = list(state.notes)
-    for r in retried:
-        notes.append(f"time step halved after a stop: {r}")
-    notes.append(f"{n} clusters, {setup.nsteps} steps of {setup.dyn.dt / (pot.r0 / pot.c0):.4f} r0/c0, "
-                 f"{n * setup.nsteps / max(t_run, 1e-9):.3g} particle-steps/s, "
-                 f"{setup.calc.nl.nbuilds} neighbour-list builds")
-    notes.append(f"front fit: rms residual {state.fit_rms / units.um:.3g} um = {state.fit_rms / state.width:.3f} "
-                 f"slabs; D over the two halves of the fit {state.D_halves[0] / units.km_s:.4g}, "
-                 f"{state.D_halves[1] / units.km_s:.4g} km/s")
-    if ref is not None:
-        notes.append(f"reference: {ref.name} Hugoniot, {ref.source}")
-    if two is not None:
-        notes.append(f"two-phase: {two['matrix']} matrix with {two['n_spheres']} {two['inclusion']} spheres, "
-                     f"inclusion mass fraction {two['mass_fraction']:.4f} (target {two['mass_fraction_target']:g}), "
-                     f"volume fraction {two['volume_fraction']:.4f}; no experimental reference")
-    extra = {"steady": state.steady, "steady_reasons": list(state.steady_reasons),
-             "fit_rms_um": state.fit_rms / units.um, "fit_rms_slabs": state.fit_rms / state.width,
-             "D_halves_km_s": [h / units.km_s for h in state.D_halves],
-             "mass_check": state.mass_check, "momentum_check": state.momentum_check,
-             "ejecta_fraction": state.ejecta,
-             "rho_bins_g_cm3": state.rho_bins / units.g_cm3, "rho0_g_cm3": setup.rho0 / units.g_cm3
-             if setup.rho0 else setup.material.rho0 / units.g_cm3,
-             "n_particles": n, "n_steps": setup.nsteps, "particle_steps": n * setup.nsteps,
-             "timestep_r0_c0": setup.dyn.dt / (pot.r0 / pot.c0), "dt_factor_used": factor,
-             "dt_retries_used": len(retried),
-             "stepping_time_s": t_run,
-             "particle_steps_per_s": n * setup.nsteps / max(t_run, 1e-9)}
-    if two is not None:
-        extra["two_phase"] = {k: v_ for k, v_ in two.items() if k not in ("centres", "diameters")}
-        extra["two_phase"]["rho0"] = two["rho0"] / units.g_cm3
-    res = SceneResult("shock", q, time.perf_counter() - t0, files=files, notes=notes, extra=extra)
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+#: fewest repeat cells along the shock: the front must cross enough slabs for a fit
+MIN_CELLS = 20
+
+
+class ShockScene(SceneDef):
+    """The ``shock`` scene on the lifecycle (module docstring)."""
+
+    name = "shock"
+    description = "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot"
+    params = scene_params(PARAMS)
+
+    def check(self, v):
+        mat = get_material(v["material"])
+        if mat.curve is None:
+            raise InputError("material", v["material"], "a material with a cold curve: " + ", ".join(CD_MATERIALS))
+        if v["size"][0] < MIN_CELLS:
+            raise InputError("size", "x".join(map(str, v["size"])),
+                             f"at least {MIN_CELLS} repeat cells along the shock (the front is fitted over "
+                             f"slabs); e.g. {MIN_CELLS}x{v['size'][1]}x{v['size'][2]}")
+        rep = repeat_lengths(v["direction"], v["r0"])
+        need = 2.0 * v["rc"] * v["r0"]
+        for k in (1, 2):
+            if rep[k] * v["size"][k] < need:
+                nmin = int(math.ceil(need / rep[k]))
+                raise InputError("size", "x".join(map(str, v["size"])),
+                                 f"a periodic cross-section at least 2 rc r0 wide ({nmin} cells across for "
+                                 f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
+
+    def setup(self, v, stage):
+        s = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"], v["noise"],
+                        v["seed"], v["dt_factor"], attraction=v["attraction"], inclusion=v["inclusion"],
+                        inclusion_fraction=v["inclusion_fraction"],
+                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"])
+        ax = s.axis
+        info = {"piston": np.nonzero(s.piston_mask)[0], "nsteps": s.nsteps, "slab": s.slab, "length": s.length,
+                "u": s.u, "rho0": s.rho0, "axis": ax, "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
+                "two_phase": {k: x for k, x in (s.two_phase or {}).items()}}
+        return s.atoms, s.dyn, info
+
+    def attach(self, v, stage, atoms, dyn, info):
+        mask = np.zeros(len(atoms), bool)
+        mask[np.asarray(info["piston"], dtype=np.int64)] = True
+        calc = atoms.calc
+        pistons = [c for c in atoms.constraints if hasattr(c, "force")]
+        two = info["two_phase"] or None
+        setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
+                           float(info["length"]), get_material(v["material"]), float(info["u"]),
+                           rest_volumes(atoms), float(info["rho0"]), two, int(info["axis"]))
+        tracker = shock_tracker(setup, float(info["x0"]))
+        ax = setup.axis
+
+        def frame(d):
+            out = calc.compute(atoms, per_particle=True)
+            tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
+
+        others = [k for k in range(3) if k != ax]
+        area = atoms.cell[others[0], others[0]] * atoms.cell[others[1], others[1]]
+        piston = setup.piston
+        obs = {"piston_force": (lambda a: -piston.force[ax] / units.N, "N"),
+               "piston_pressure": (lambda a: -piston.force[ax] / area / units.GPa, "GPa")}
+        st = Stage(stage, atoms, dyn, setup.nsteps, v["frames"], info, on_frame=frame, analysis=tracker,
+                   observables=obs)
+        st.setup = setup
+        return st
+
+    def finish(self, v, stage):
+        s = stage.setup
+        pot = s.calc.potentials[0]
+        return {"tracker": stage.analysis.get_state(), "n": len(s.atoms), "nsteps": s.nsteps, "t_run": stage.t_run,
+                "nbuilds": s.calc.nl.nbuilds, "dt_r0_c0": stage.dyn.dt / (pot.r0 / pot.c0),
+                "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"]}
+
+    def retry(self, v, stage, exc, attempt):
+        if exc.quantity != "timestep" or attempt > v["dt_retries"]:
+            return None
+        note = (f"dt factor {v['dt_factor']:g}: stopped at step {exc.step} by the stiffness check (closest pair "
+                f"{exc.particles}, timestep {exc.value:.4g} > limit {exc.limit:.4g})")
+        return {**v, "dt_factor": 0.5 * v["dt_factor"], "_retried": list(v.get("_retried", [])) + [note]}
+
+    def analyse(self, v, summaries):
+        sm = summaries[0]
+        tracker = ShockTracker.from_state(sm["tracker"])
+        state = tracker.result()
+        two = sm["two_phase"] or None
+        mat = get_material(v["material"])
+        q, ref = shock_quantities(state, mat, sm["u"], reference=two is None)
+        n, nsteps, t_run = sm["n"], sm["nsteps"], sm["t_run"]
+        notes = list(state.notes)
+        for r in v.get("_retried", []):
+            notes.append(f"time step halved after a stop: {r}")
+        notes.append(f"{n} clusters, {nsteps} steps of {sm['dt_r0_c0']:.4f} r0/c0, "
+                     f"{n * nsteps / max(t_run, 1e-9):.3g} particle-steps/s, {sm['nbuilds']} neighbour-list builds")
+        notes.append(f"front fit: rms residual {state.fit_rms / units.um:.3g} um = {state.fit_rms / state.width:.3f} "
+                     f"slabs; D over the two halves of the fit {state.D_halves[0] / units.km_s:.4g}, "
+                     f"{state.D_halves[1] / units.km_s:.4g} km/s")
+        if ref is not None:
+            notes.append(f"reference: {ref.name} Hugoniot, {ref.source}")
+        if two is not None:
+            notes.append(f"two-phase: {two['matrix']} matrix with {two['n_spheres']} {two['inclusion']} spheres, "
+                         f"inclusion mass fraction {two['mass_fraction']:.4f} (target {two['mass_fraction_target']:g}), "
+                         f"volume fraction {two['volume_fraction']:.4f}; no experimental reference")
+        extra = {"steady": state.steady, "steady_reasons": list(state.steady_reasons),
+                 "fit_rms_um": state.fit_rms / units.um, "fit_rms_slabs": state.fit_rms / state.width,
+                 "D_halves_km_s": [h / units.km_s for h in state.D_halves],
+                 "mass_check": state.mass_check, "momentum_check": state.momentum_check,
+                 "ejecta_fraction": state.ejecta, "rho_bins_g_cm3": state.rho_bins / units.g_cm3,
+                 "rho0_g_cm3": sm["rho0"] / units.g_cm3, "n_particles": n, "n_steps": nsteps,
+                 "particle_steps": n * nsteps, "timestep_r0_c0": sm["dt_r0_c0"], "dt_factor_used": v["dt_factor"],
+                 "dt_retries_used": len(v.get("_retried", [])), "stepping_time_s": t_run,
+                 "particle_steps_per_s": n * nsteps / max(t_run, 1e-9)}
+        if two is not None:
+            extra["two_phase"] = {k: x for k, x in two.items() if k not in ("centres", "diameters")}
+            extra["two_phase"]["rho0"] = two["rho0"] / units.g_cm3
+        return q, notes, extra
+
+    def report(self, v, summaries, result, out):
+        sm = summaries[0]
+        tracker = ShockTracker.from_state(sm["tracker"])
+        state = tracker.result()
+        mat = get_material(v["material"])
+        ref_P = result.quantities["P"].reference
         png = out / "shock.png"
-        plot_shock(tracker, state, png, f"{setup.material.name} [{v['direction']}] u = "
-                   f"{setup.u / units.km_s:g} km/s")
-        files.append(png)
+        plot_shock(tracker, state, png, f"{mat.name} [{v['direction']}] along {v['axis']}, u = "
+                   f"{sm['u'] / units.km_s:g} km/s", u=sm["u"], P_ref=ref_P)
         import csv
-        with open(out / "shock_front.csv", "w", newline="") as fh:
+        front = out / "shock_front.csv"
+        with open(front, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["t_ns", "front_um", "piston_um"])
             for f in tracker.frames:
                 w.writerow([f["t"] / units.ns, f["front"] / units.um, f["piston"] / units.um])
-        files.append(out / "shock_front.csv")
-    res.wall_time_s = time.perf_counter() - t0
-    return res
+        prof = out / "shock_profiles.csv"
+        ax = tracker.axis
+        with open(prof, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["t_ns", "x_um", "density_g_cm3", "u_km_s", "minus_sigma_long_GPa", "von_mises_GPa"])
+            for f in tracker.frames:
+                p = f["profile"]
+                for k in range(len(p["x"])):
+                    w.writerow([f"{f['t'] / units.ns:.6g}", f"{p['x'][k] / units.um:.6g}",
+                                f"{p['density'][k] / units.g_cm3:.6g}", f"{p['velocity'][k, ax] / units.km_s:.6g}",
+                                f"{-p['stress'][k, ax] / units.GPa:.6g}", f"{p['von_mises'][k] / units.GPa:.6g}"])
+        return [png, front, prof]
+
+
+register_scene(ShockScene())
