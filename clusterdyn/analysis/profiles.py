@@ -75,6 +75,18 @@ class ProfileRecorder:
         self.t.append(float(time))
         return p
 
+    def get_state(self):
+        """Everything needed to resume (for checkpoints)."""
+        return {"width": self.width, "axis": self.axis, "lo": self.lo, "hi": self.hi, "edges": self.edges,
+                "frames": {k: list(v) for k, v in self.frames.items()}, "t": list(self.t)}
+
+    def set_state(self, st):
+        """Resume from :meth:`get_state` (in place)."""
+        self.width, self.axis, self.lo, self.hi = st["width"], int(st["axis"]), st["lo"], st["hi"]
+        self.edges = None if st["edges"] is None else np.asarray(st["edges"], float)
+        self.frames = {k: [np.asarray(x) for x in st["frames"][k]] for k in self.KEYS}
+        self.t = [float(x) for x in st["t"]]
+
     def arrays(self):
         if self.edges is None:
             raise InputError("trajectory", "no frames", "at least one frame")

@@ -25,23 +25,24 @@ periodic cross-section is rescaled toward zero lateral stress.
 
 import csv
 import math
-import time
 
 import numpy as np
 
 from .. import units
 from ..analysis.profiles import ProfileRecorder, write_profiles_csv
 from ..analysis.stress import particle_virials
-from ..build import Plate, fcc_packing, polycrystal, polycrystal_summary
+from ..build import Plate, fcc_packing, polycrystal
 from ..build.lattice import SQRT2
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
-from .base import Param, Quantity, SceneResult, register
-from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
-from .shock import ShockSetup, run_shock, shock_quantities
+from .base import Param, Quantity, register_scene
+from .common import make_piston, matplotlib_agg, thermal_noise
+from .lifecycle import SceneDef, Stage, scene_params
+from ..analysis.shock import ShockTracker
+from .shock import ShockSetup, shock_info, shock_quantities, shock_stage, shock_summary
 
 #: gap between the plates' surfaces at the start, in r0 (just beyond the cutoff)
 GAP = 1.25
@@ -174,36 +175,43 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
 
 
 # --------------------------------------------------------------------------- run + analysis
-def run_impact(setup, duration=None, frames=60, fsv_every=5, progress=True):
-    """Run an impact; record slab profiles (``frames``) and the rear free-surface velocity."""
-    atoms, calc, dyn = setup["atoms"], setup["calc"], setup["dyn"]
-    r0, v = setup["r0"], setup["v"]
-    cL = math.sqrt(1.5) * setup["c0"]             # [100] longitudinal speed of the lattice
-    if duration is None:                          # waves in a porous polycrystal are slower
-        slow = 1.0 if setup["sample"] == "single" else 1.6
-        duration = slow * (setup["target"] + 3.0 * setup["flyer"]) / cL
-    nsteps = int(math.ceil(duration / setup["dt"]))
-    rec = ProfileRecorder(2.0 * r0, axis=0, lo=atoms.positions[:, 0].min() - 10 * r0,
-                          hi=atoms.positions[:, 0].max() + 10 * r0)
-    rear = setup["rear"]
-    m_rear = atoms.get_masses()[rear]
-    fsv_t, fsv_v = [], []
+class ImpactRecord:
+    """Analysis state of an impact run: slab profiles every frame and the rear free-surface velocity."""
 
-    def fsv():
-        u = (m_rear * atoms.get_velocities()[rear, 0]).sum() / m_rear.sum()
-        fsv_t.append(dyn.get_time())
-        fsv_v.append(u + 0.5 * v)                 # target rest frame
+    def __init__(self, atoms, dyn, info):
+        r0, self.v = info["r0"], info["v"]
+        x = atoms.positions[:, 0]
+        self.rec = ProfileRecorder(2.0 * r0, axis=0, lo=x.min() - 10 * r0, hi=x.max() + 10 * r0)
+        self.rear = np.asarray(info["rear"], dtype=np.int64)
+        self.m_rear = atoms.get_masses()[self.rear]
+        self.atoms, self.dyn = atoms, dyn
+        self.fsv_t, self.fsv_v = [], []
 
-    dyn.attach(fsv, interval=fsv_every)
+    def fsv(self):
+        u = (self.m_rear * self.atoms.get_velocities()[self.rear, 0]).sum() / self.m_rear.sum()
+        self.fsv_t.append(self.dyn.get_time())
+        self.fsv_v.append(u + 0.5 * self.v)                 # target rest frame
 
-    def frame(d):
-        out = calc.compute(atoms, per_particle=True)
-        rec.add(atoms, out["virials"], d.get_time())
+    def frame(self, d):
+        out = self.atoms.calc.compute(self.atoms, per_particle=True)
+        self.rec.add(self.atoms, out["virials"], d.get_time())
 
-    t_run = run_frames(dyn, nsteps, frames, frame, progress=progress, desc=f"plate impact ({setup['sample']})")
-    dyn.observers.clear()
-    return {"profiles": rec.arrays(), "fsv_t": np.array(fsv_t), "fsv_v": np.array(fsv_v),
-            "nsteps": nsteps, "t_run": t_run}
+    def get_state(self):
+        return {"profiles": self.rec.get_state(), "fsv_t": list(self.fsv_t), "fsv_v": list(self.fsv_v)}
+
+    def set_state(self, st):
+        self.rec.set_state(st["profiles"])
+        self.fsv_t = [float(x) for x in st["fsv_t"]]
+        self.fsv_v = [float(x) for x in st["fsv_v"]]
+
+
+def impact_duration(info, duration=None):
+    """Run time: ``duration`` or the time the waves need to cross the target and the flyer's release."""
+    if duration is not None:
+        return duration
+    cL = math.sqrt(1.5) * info["c0"]              # [100] longitudinal speed of the lattice
+    slow = 1.0 if info["sample"] == "single" else 1.6      # waves in a porous polycrystal are slower
+    return slow * (info["target"] + 3.0 * info["flyer"]) / cL
 
 
 def _fronts(prof, x_impact, x_rear, p_threshold_main=0.5, floor=0.15 * units.GPa):
@@ -313,15 +321,14 @@ def analyse_impact(setup, run):
             "D_main": D_main, "D_pre": D_pre, "vm_plateau": vm_plateau, "vm_front": vm_front, "vm_rest": vm_rest,
             "sxx_plateau": sxx, "u_behind": u_behind, "precursor_amp": precursor_amp,
             "fsv_plateau": fsv_plateau, "fsv_min": fsv_min, "pullback": pullback, "t_arrival": t_arrival,
-            "separated": _separated(setup), "tau": tau}
+            "separated": bool(run["separated"]), "tau": tau}
 
 
-def _separated(setup):
+def _separated(atoms, r0):
     """True if the target has split (a gap wider than 1.5 r0 across its thickness) or left the flyer."""
-    atoms = setup["atoms"]
     x = np.sort(atoms.positions[:, 0])
     gaps = np.diff(x)
-    return bool(gaps.max() > 1.5 * setup["r0"])
+    return bool(gaps.max() > 1.5 * r0)
 
 
 # --------------------------------------------------------------------------- output
@@ -474,53 +481,90 @@ def impact_quantities(name, setup, an, mat):
         p + "pullback": Quantity(an["pullback"] / units.m_s, "m/s",
                                  note="free-surface plateau minus the minimum after it"),
     }
-    if setup["reports"][0] is not None:
+    if setup["reports"][0]:
         por = np.mean([r["porosity"] for r in setup["reports"]])
         q[p + "porosity"] = Quantity(por, "", note="1 - rho/rho0 of the plates as built")
     return q, ref
 
 
-@register("plate-impact", "two Al plates colliding: stress and von Mises profiles, precursor, VISAR trace; "
-          "single crystal vs polycrystal", PARAMS)
-def plate_impact_scene(vals, out=None, progress=True):
-    t0 = time.perf_counter()
-    samples = ("single", "polycrystal") if vals["sample"] == "both" else (vals["sample"],)
-    results, quantities, notes, times_by = {}, {}, [], {}
-    for name in samples:
-        setup = build_impact(name, "Al", vals["v"], vals["r0"], vals["flyer"], vals["target"], vals["width"],
-                             vals["grain_size"], vals["d_min"], vals["porosity"], vals["seed"], vals["noise"],
-                             vals["J"], relax_cycles=vals["relax_cycles"], boundaries=vals["boundaries"])
-        run = run_impact(setup, vals["duration"], vals["frames"], progress=progress)
-        an = analyse_impact(setup, run)
-        results[name] = (setup, run, an)
-        times_by[name] = _profile_times(vals["profile_times"], setup)
-        q, ref = impact_quantities(name, setup, an, setup["material"])
-        quantities.update(q)
-        n = len(setup["atoms"])
-        notes.append(f"{name}: {n} clusters, {run['nsteps']} steps, {run['t_run']:.1f} s stepping, "
-                     f"{'target split or separated' if an['separated'] else 'no separation'}")
-        if setup["reports"][0] is not None:
-            notes.append("polycrystal flyer: " + _summary(setup["reports"][0]))
-        if setup["relax"] is not None:
-            s = setup["relax"]["stress"] / units.GPa
-            notes.append(f"relaxed: mean stress xx yy zz = {s[0]:.3f} {s[1]:.3f} {s[2]:.3f} GPa, nearest "
-                         f"pair {setup['relax']['min_r_over_r0']:.3f} r0")
-    if "single" in results and "polycrystal" in results:
-        a, b = results["single"][2], results["polycrystal"][2]
-        quantities["plateau_ratio"] = Quantity(b["vm_plateau"] / a["vm_plateau"], "",
-                                               note="polycrystal / single-crystal intensity plateau")
-    files = []
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+class PlateImpactScene(SceneDef):
+    """The ``plate-impact`` scene on the lifecycle (one stage per sample)."""
+
+    name = "plate-impact"
+    description = ("two Al plates colliding: stress and von Mises profiles, precursor, VISAR trace; "
+                   "single crystal vs polycrystal")
+    params = scene_params(PARAMS)
+
+    def check(self, v):
+        if v["sample"] != "single" and v["grain_size"] > 2 * min(v["flyer"], v["target"]):
+            raise InputError("grain_size", v["grain_size"], f"at most twice the thinner plate "
+                             f"({min(v['flyer'], v['target']):g} r0)")
+        _profile_times(v["profile_times"], {"c0": 1.0, "target": 1.0})
+
+    def plan(self, v):
+        return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
+
+    def setup(self, v, stage):
+        s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
+                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
+                         boundaries=v["boundaries"])
+        info = {k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer", "target", "width", "sample", "c0")}
+        info["rear"] = np.nonzero(s["rear"])[0]
+        info["reports"] = [r if r is not None else {} for r in s["reports"]]
+        info["relax"] = s["relax"] if s["relax"] is not None else {}
+        info["nsteps"] = int(math.ceil(impact_duration(info, v["duration"]) / s["dt"]))
+        return s["atoms"], s["dyn"], info
+
+    def attach(self, v, stage, atoms, dyn, info):
+        rec = ImpactRecord(atoms, dyn, info)
+        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
+                     observers=[(rec.fsv, 5)])
+
+    def finish(self, v, stage):
+        rec = stage.analysis
+        return {"name": stage.name, "info": stage.info, "profiles": rec.rec.arrays(),
+                "fsv_t": np.array(rec.fsv_t), "fsv_v": np.array(rec.fsv_v), "nsteps": stage.nsteps,
+                "t_run": stage.t_run, "separated": _separated(stage.atoms, stage.info["r0"]), "n": len(stage.atoms)}
+
+    def _results(self, summaries):
+        return {sm["name"]: (sm["info"], sm, analyse_impact(sm["info"], sm)) for sm in summaries}
+
+    def analyse(self, v, summaries):
+        results = self._results(summaries)
+        quantities, notes = {}, []
+        mat = get_material("Al")
+        for name, (info, run, an) in results.items():
+            q, ref = impact_quantities(name, info, an, mat)
+            quantities.update(q)
+            notes.append(f"{name}: {run['n']} clusters, {run['nsteps']} steps, {run['t_run']:.1f} s stepping, "
+                         f"{'target split or separated' if an['separated'] else 'no separation'}")
+            if info["reports"][0]:
+                notes.append("polycrystal flyer: " + _summary(info["reports"][0]))
+            if info["relax"]:
+                st = np.asarray(info["relax"]["stress"]) / units.GPa
+                notes.append(f"relaxed: mean stress xx yy zz = {st[0]:.3f} {st[1]:.3f} {st[2]:.3f} GPa, nearest "
+                             f"pair {info['relax']['min_r_over_r0']:.3f} r0")
+        if "single" in results and "polycrystal" in results:
+            a, b = results["single"][2], results["polycrystal"][2]
+            quantities["plateau_ratio"] = Quantity(b["vm_plateau"] / a["vm_plateau"], "",
+                                                   note="polycrystal / single-crystal intensity plateau")
+        return quantities, notes, {}
+
+    def report(self, v, summaries, result, out):
+        results = self._results(summaries)
+        times_by = {name: _profile_times(v["profile_times"], info) for name, (info, _, _) in results.items()}
         plot_impact(results, out / "plate_impact_profiles.png", times_by)
         plot_visar(results, out / "plate_impact_visar.png")
-        files += [out / "plate_impact_profiles.png", out / "plate_impact_visar.png"]
-        for name, (setup, run, an) in results.items():
+        files = [out / "plate_impact_profiles.png", out / "plate_impact_visar.png"]
+        for name, (info, run, an) in results.items():
             prof = run["profiles"]
             files.append(write_profiles_csv(out / f"plate_impact_profiles_{name}.csv", prof,
                                             frames=_pick_frames(prof, times_by[name])))
             files.append(write_visar_csv(out / f"plate_impact_visar_{name}.csv", run))
-    return SceneResult("plate-impact", quantities, time.perf_counter() - t0, files=files, notes=notes)
+        return files
+
+
+register_scene(PlateImpactScene())
 
 
 def _summary(r):
@@ -529,21 +573,19 @@ def _summary(r):
 
 
 # --------------------------------------------------------------------------- polycrystal shock (D-u)
-def polycrystal_shock(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
-                      length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
-                      noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12, frames=40,
-                      progress=True):
-    """Piston shock at ``u`` in a relaxed polycrystal (or a [100] single crystal): D, u, P, rho.
+def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
+                            length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
+                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12):
+    """Piston shock set-up at ``u`` in a relaxed polycrystal (or a [100] single crystal).
 
     The block (``length`` x ``width`` x ``width`` r0, periodic across) is
-    relaxed (:func:`relax_sample`), a 1.5 r0 layer at x-min becomes the
-    piston, and the shock scene's tracker (:func:`clusterdyn.scenes.shock.run_shock`)
-    fits D.  The density ahead of the front is the porous sample's own.
+    relaxed (:func:`relax_sample`) and a 1.5 r0 layer at x-min becomes the
+    piston.  The density ahead of the front is the porous sample's own.
 
     Returns
     -------
-    (ShockState, dict)
-        The state and a dict with the sample report, rho0 of the sample and notes.
+    (ShockSetup, dict)
+        The set-up and a dict with the sample report and the relaxation.
     """
     mat = get_material(material)
     a = SQRT2 * r0
@@ -576,10 +618,9 @@ def polycrystal_shock(u=1.0 * units.km_s, sample="polycrystal", material="Al", r
     except InputError:
         d_guess = pot.c0 + 1.3 * u
     nsteps = int(math.ceil(0.8 * L / d_guess / dt))
-    setup = ShockSetup(atoms, calc, dyn, piston, mask, nsteps, max(a, r0), L, mat.replace(rho0=rho0), u)
-    tracker, state, t_run = run_shock(setup, frames, progress, desc=f"shock ({sample})")
-    return state, {"report": report, "rho0": rho0, "relax": relax, "n": len(atoms), "nsteps": nsteps,
-                   "t_run": t_run, "tracker": tracker}
+    setup = ShockSetup(atoms, calc, dyn, piston, mask, nsteps, max(a, r0), L, mat.replace(rho0=rho0), u,
+                       rho0=rho0)
+    return setup, {"report": report or {}, "relax": relax or {}}
 
 
 SHOCK_PARAMS = [
@@ -595,50 +636,85 @@ SHOCK_PARAMS = [
 ]
 
 
-@register("polycrystal-shock", "piston shock in a relaxed Al polycrystal of given porosity: D-u point "
-          "beside the single crystal and the experimental Hugoniot", SHOCK_PARAMS)
-def polycrystal_shock_scene(vals, out=None, progress=True):
-    t0 = time.perf_counter()
-    u = vals["u"]
-    mat = get_material("Al")
-    runs = {"pc": polycrystal_shock(u, "polycrystal", r0=vals["r0"], length=vals["length"], width=vals["width"],
-                                    grain_size=vals["grain_size"], porosity=vals["porosity"], seed=vals["seed"],
-                                    frames=vals["frames"], progress=progress)}
-    if vals["single"]:
-        runs["sc"] = polycrystal_shock(u, "single", r0=vals["r0"], length=vals["length"], width=vals["width"],
-                                       seed=vals["seed"], frames=vals["frames"], progress=progress)
-    ref = hugoniot("Al-1100")
-    q, notes = {}, []
-    for key, (state, info) in runs.items():
-        qq, _ = shock_quantities(state, mat, u)
-        for name in ("D", "u", "P", "rho"):
-            q[f"{key}_{name}"] = qq[name]
-        notes.append(f"{key}: {info['n']} clusters, rho0 {info['rho0'] / units.g_cm3:.4f} g/cm3, "
-                     f"{info['nsteps']} steps, {' '.join(state.notes) or 'steady'}")
-    if "pc" in runs and runs["pc"][1]["report"] is not None:
-        notes.append("polycrystal: " + _summary(runs["pc"][1]["report"]))
-        q["pc_porosity"] = Quantity(runs["pc"][1]["report"]["porosity"], "", vals["porosity"])
-    notes.append(f"reference: Al-1100 D = {ref.D(u) / units.km_s:.3f} km/s at u = {u / units.km_s:g} km/s "
-                 "(dense metal; a porous sample's own Hugoniot lies lower)")
-    files = []
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+class PolycrystalShockScene(SceneDef):
+    """The ``polycrystal-shock`` scene on the lifecycle (stages: pc, then sc)."""
+
+    name = "polycrystal-shock"
+    description = ("piston shock in a relaxed Al polycrystal of given porosity: D-u point beside the single "
+                   "crystal and the experimental Hugoniot")
+    params = scene_params(SHOCK_PARAMS)
+
+    def plan(self, v):
+        return ["pc", "sc"] if v["single"] else ["pc"]
+
+    def setup(self, v, stage):
+        s, extra = polycrystal_shock_setup(v["u"], "polycrystal" if stage == "pc" else "single", r0=v["r0"],
+                                           length=v["length"], width=v["width"], grain_size=v["grain_size"],
+                                           porosity=v["porosity"], seed=v["seed"])
+        info = shock_info(s)
+        info.update(extra)
+        return s.atoms, s.dyn, info
+
+    def attach(self, v, stage, atoms, dyn, info):
+        mat = get_material("Al").replace(rho0=float(info["rho0"]))
+        return shock_stage(stage, atoms, dyn, info, mat, v["frames"])
+
+    def finish(self, v, stage):
+        sm = shock_summary(stage)
+        sm.update({"name": stage.name, "report": stage.info["report"], "relax": stage.info["relax"]})
+        return sm
+
+    def analyse(self, v, summaries):
+        u = v["u"]
+        mat = get_material("Al")
+        ref = hugoniot("Al-1100")
+        q, notes = {}, []
+        for sm in summaries:
+            key = sm["name"]
+            state = ShockTracker.from_state(sm["tracker"]).result()
+            qq, _ = shock_quantities(state, mat, u)
+            for name in ("D", "u", "P", "rho"):
+                q[f"{key}_{name}"] = qq[name]
+            notes.append(f"{key}: {sm['n']} clusters, rho0 {sm['rho0'] / units.g_cm3:.4f} g/cm3, "
+                         f"{sm['nsteps']} steps, {' '.join(state.notes) or 'steady'}")
+            if key == "pc" and sm["report"]:
+                notes.append("polycrystal: " + _summary(sm["report"]))
+                q["pc_porosity"] = Quantity(sm["report"]["porosity"], "", v["porosity"])
+        notes.append(f"reference: Al-1100 D = {ref.D(u) / units.km_s:.3f} km/s at u = {u / units.km_s:g} km/s "
+                     "(dense metal; a porous sample's own Hugoniot lies lower)")
+        return q, notes, {}
+
+    def report(self, v, summaries, result, out):
+        import csv
+        ref = hugoniot("Al-1100")
         plt = matplotlib_agg()
         fig, ax = plt.subplots(figsize=(6, 4.5))
         uu = np.linspace(0, 3, 50)
         ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", label="Al-1100 (experiment)")
-        for key, (state, info) in runs.items():
-            lab = {"pc": "CD polycrystal", "sc": "CD single crystal [100]"}[key]
-            if key == "pc" and info["report"] is not None:
-                lab += f" (porosity {100 * info['report']['porosity']:.1f}%)"
-            ax.errorbar([state.u / units.km_s], [state.D_fit / units.km_s],
-                        yerr=[state.D_fit_err / units.km_s], fmt="o", label=lab)
+        rows = []
+        for sm in summaries:
+            state = ShockTracker.from_state(sm["tracker"]).result()
+            lab = {"pc": "CD polycrystal", "sc": "CD single crystal [100]"}[sm["name"]]
+            if sm["name"] == "pc" and sm["report"]:
+                lab += f" (porosity {100 * sm['report']['porosity']:.1f}%)"
+            ax.errorbar([state.u / units.km_s], [state.D_fit / units.km_s], yerr=[state.D_fit_err / units.km_s],
+                        fmt="o", label=lab)
+            rows.append([sm["name"], state.u / units.km_s, state.D_fit / units.km_s, state.D_fit_err / units.km_s,
+                         sm["rho0"] / units.g_cm3])
         ax.set_xlabel("u (km/s)")
         ax.set_ylabel("D (km/s)")
         ax.legend()
         ax.set_title("D-u point")
         fig.tight_layout()
-        fig.savefig(out / "polycrystal_shock_Du.png", dpi=110)
+        png = out / "polycrystal_shock_Du.png"
+        fig.savefig(png, dpi=110)
         plt.close(fig)
-        files.append(out / "polycrystal_shock_Du.png")
-    return SceneResult("polycrystal-shock", q, time.perf_counter() - t0, files=files, notes=notes)
+        path = out / "polycrystal_shock_Du.csv"
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["sample", "u_km_s", "D_km_s", "D_err_km_s", "rho0_g_cm3"])
+            w.writerows(rows)
+        return [png, path]
+
+
+register_scene(PolycrystalShockScene())

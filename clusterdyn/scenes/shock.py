@@ -9,7 +9,6 @@ experimental Hugoniot (Al: Al-1100, D = 5.392 + 1.341 u km/s).
 """
 
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,9 +18,9 @@ from ..analysis.shock import ShockTracker
 from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
-from ..errors import InputError, InstabilityError
+from ..errors import InputError
 from ..materials import get_material, hugoniot
-from ..md import DampedVerlet, default_timestep
+from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
@@ -337,6 +336,51 @@ def shock_quantities(state, mat, u, reference=True):
 MIN_CELLS = 20
 
 
+def shock_info(s):
+    """The encodable set-up facts of a :class:`ShockSetup` (what a restart needs besides the particles)."""
+    ax = s.axis
+    return {"piston": np.nonzero(s.piston_mask)[0], "nsteps": s.nsteps, "slab": s.slab, "length": s.length,
+            "u": s.u, "rho0": s.rho0 if s.rho0 else s.material.rho0, "axis": ax,
+            "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
+            "two_phase": {k: x for k, x in (s.two_phase or {}).items()}}
+
+
+def shock_stage(name, atoms, dyn, info, material, frames):
+    """The lifecycle stage of a piston shock: front tracker every frame, the piston's force as observables."""
+    mask = np.zeros(len(atoms), bool)
+    mask[np.asarray(info["piston"], dtype=np.int64)] = True
+    calc = atoms.calc
+    pistons = [c for c in atoms.constraints if hasattr(c, "force")]
+    two = info["two_phase"] or None
+    setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
+                       float(info["length"]), material, float(info["u"]), rest_volumes(atoms), float(info["rho0"]), two,
+                       int(info["axis"]))
+    tracker = shock_tracker(setup, float(info["x0"]))
+    ax = setup.axis
+
+    def frame(d):
+        out = calc.compute(atoms, per_particle=True)
+        tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
+
+    others = [k for k in range(3) if k != ax]
+    area = atoms.cell[others[0], others[0]] * atoms.cell[others[1], others[1]]
+    piston = setup.piston
+    obs = {"piston_force": (lambda a: -piston.force[ax] / units.N, "N"),
+           "piston_pressure": (lambda a: -piston.force[ax] / area / units.GPa, "GPa")}
+    st = Stage(name, atoms, dyn, setup.nsteps, frames, info, on_frame=frame, analysis=tracker, observables=obs)
+    st.setup = setup
+    return st
+
+
+def shock_summary(stage):
+    """Encodable summary of a finished shock stage (tracker frames and run figures)."""
+    s = stage.setup
+    pot = s.calc.potentials[0]
+    return {"tracker": stage.analysis.get_state(), "n": len(s.atoms), "nsteps": s.nsteps, "t_run": stage.t_run,
+            "nbuilds": s.calc.nl.nbuilds, "dt_r0_c0": stage.dyn.dt / (pot.r0 / pot.c0),
+            "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"]}
+
+
 class ShockScene(SceneDef):
     """The ``shock`` scene on the lifecycle (module docstring)."""
 
@@ -366,44 +410,13 @@ class ShockScene(SceneDef):
                         v["seed"], v["dt_factor"], attraction=v["attraction"], inclusion=v["inclusion"],
                         inclusion_fraction=v["inclusion_fraction"],
                         inclusion_diameter=v["inclusion_diameter"], axis=v["axis"])
-        ax = s.axis
-        info = {"piston": np.nonzero(s.piston_mask)[0], "nsteps": s.nsteps, "slab": s.slab, "length": s.length,
-                "u": s.u, "rho0": s.rho0, "axis": ax, "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
-                "two_phase": {k: x for k, x in (s.two_phase or {}).items()}}
-        return s.atoms, s.dyn, info
+        return s.atoms, s.dyn, shock_info(s)
 
     def attach(self, v, stage, atoms, dyn, info):
-        mask = np.zeros(len(atoms), bool)
-        mask[np.asarray(info["piston"], dtype=np.int64)] = True
-        calc = atoms.calc
-        pistons = [c for c in atoms.constraints if hasattr(c, "force")]
-        two = info["two_phase"] or None
-        setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
-                           float(info["length"]), get_material(v["material"]), float(info["u"]),
-                           rest_volumes(atoms), float(info["rho0"]), two, int(info["axis"]))
-        tracker = shock_tracker(setup, float(info["x0"]))
-        ax = setup.axis
-
-        def frame(d):
-            out = calc.compute(atoms, per_particle=True)
-            tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
-
-        others = [k for k in range(3) if k != ax]
-        area = atoms.cell[others[0], others[0]] * atoms.cell[others[1], others[1]]
-        piston = setup.piston
-        obs = {"piston_force": (lambda a: -piston.force[ax] / units.N, "N"),
-               "piston_pressure": (lambda a: -piston.force[ax] / area / units.GPa, "GPa")}
-        st = Stage(stage, atoms, dyn, setup.nsteps, v["frames"], info, on_frame=frame, analysis=tracker,
-                   observables=obs)
-        st.setup = setup
-        return st
+        return shock_stage(stage, atoms, dyn, info, get_material(v["material"]), v["frames"])
 
     def finish(self, v, stage):
-        s = stage.setup
-        pot = s.calc.potentials[0]
-        return {"tracker": stage.analysis.get_state(), "n": len(s.atoms), "nsteps": s.nsteps, "t_run": stage.t_run,
-                "nbuilds": s.calc.nl.nbuilds, "dt_r0_c0": stage.dyn.dt / (pot.r0 / pot.c0),
-                "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"]}
+        return shock_summary(stage)
 
     def retry(self, v, stage, exc, attempt):
         if exc.quantity != "timestep" or attempt > v["dt_retries"]:
