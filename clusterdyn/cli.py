@@ -103,7 +103,14 @@ def cmd_run(args):
 
 
 def cmd_study(args):
-    from .studies import get_study
+    from .studies import get_study, study_params, study_summary
+    if args.help:
+        study = get_study(args.study)
+        print(f"{args.study}: {study_summary(args.study)}")
+        print("parameters (--set key=value):")
+        for p in study_params(args.study):
+            print(f"    {p.describe()}")
+        return 0
     _threads(args)
     study = get_study(args.study)
     out = Path(args.out) if args.out else None
@@ -115,10 +122,17 @@ def cmd_study(args):
 
 def cmd_list(args):
     from .scenes import all_scenes
+    from .studies import study_names, study_params, study_summary
+    print("scenes (clusterdyn run SCENE --set key=value ...):")
     for name, sc in sorted(all_scenes().items()):
-        print(f"{name}: {sc.description}")
+        print(f"  {name}: {sc.description}")
         for p in sc.params:
-            print(f"    {p.describe()}")
+            print(f"      {p.describe()}")
+    print("studies (clusterdyn study STUDY --set key=value ...; clusterdyn study STUDY --help):")
+    for name in study_names():
+        print(f"  {name}: {study_summary(name)}")
+        for p in study_params(name):
+            print(f"      {p.describe()}")
     return 0
 
 
@@ -173,8 +187,9 @@ def build_parser():
     r.add_argument("--threads", type=int, metavar="N", help="threads of the kernels (default: all; "
                    "one is faster on a machine busy with other jobs)")
     r.set_defaults(func=cmd_run)
-    s = sub.add_parser("study", help="run a study (hugoniot, convergence, stability)")
+    s = sub.add_parser("study", help="run a study (clusterdyn list names them)", add_help=False)
     s.add_argument("study")
+    s.add_argument("--help", "-h", action="store_true", help="the study's parameters")
     s.add_argument("--set", action="append", metavar="KEY=VALUE")
     s.add_argument("--out", metavar="DIR")
     s.add_argument("--json", action="store_true")

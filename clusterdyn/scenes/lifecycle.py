@@ -163,10 +163,13 @@ class SceneDef:
         return None
 
     # -- the lifecycle -----------------------------------------------------------------
+    def defaults(self):
+        return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
+
     def parse(self, overrides):
         """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
         known = {p.name: p for p in self.params}
-        vals = {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
+        vals = self.defaults()
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))

@@ -333,7 +333,7 @@ def shock_quantities(state, mat, u, reference=True):
 
 
 #: fewest repeat cells along the shock: the front must cross enough slabs for a fit
-MIN_CELLS = 20
+MIN_CELLS = 10
 
 
 def shock_info(s):

@@ -25,13 +25,18 @@ import importlib
 
 from ..errors import InputError
 
-#: study name -> "module:function"
+#: study name -> ("module:function:parameter list", summary)
 STUDIES = {
-    "hugoniot": "hugoniot:hugoniot_study",
-    "convergence": "convergence:convergence_study",
-    "stability": "stability:stability_study",
-    "mca-elasticity": "mca:elasticity_study",
-    "mca-degrading": "mca:degrading_study",
+    "hugoniot": ("hugoniot:hugoniot_study:PARAMS", "piston-speed sweep of the shock scene: D-u and P-rho "
+                 "against the experimental Hugoniot (also forwards the shock scene's parameters)"),
+    "convergence": ("convergence:convergence_study:PARAMS", "error of D against experiment and the finest run "
+                    "versus wall time, over size, time step, cutoff, noise and r0"),
+    "stability": ("stability:stability_study:PARAMS", "the measured time-step limit (bounded energy error) "
+                  "against u"),
+    "mca-elasticity": ("mca:elasticity_study:ELASTICITY_PARAMS", "MCA's packing-independent E, nu, K, G on "
+                       "fcc, hcp, sc and random packings, and the Cluster Dynamics contrast"),
+    "mca-degrading": ("mca:degrading_study:DEGRADING_PARAMS", "a load / unload / reload cycle of a degrading "
+                      "MCA material"),
 }
 
 
@@ -39,12 +44,29 @@ def study_names():
     return list(STUDIES)
 
 
-def get_study(name):
-    """The study function registered as ``name`` (see :data:`STUDIES`)."""
+def _entry(name):
     if name not in STUDIES:
         raise InputError("study", name, "one of " + ", ".join(STUDIES))
-    mod, fn = STUDIES[name].split(":")
-    return getattr(importlib.import_module(f"{__name__}.{mod}"), fn)
+    mod, fn, params = STUDIES[name][0].split(":")
+    return importlib.import_module(f"{__name__}.{mod}"), fn, params
 
 
-__all__ = ["STUDIES", "get_study", "study_names"]
+def get_study(name):
+    """The study function registered as ``name`` (see :data:`STUDIES`)."""
+    mod, fn, _ = _entry(name)
+    return getattr(mod, fn)
+
+
+def study_params(name):
+    """The study's own parameters (list of :class:`~clusterdyn.scenes.base.Param`)."""
+    mod, _, params = _entry(name)
+    return list(getattr(mod, params))
+
+
+def study_summary(name):
+    """One line on what the study does."""
+    _entry(name)
+    return STUDIES[name][1]
+
+
+__all__ = ["STUDIES", "get_study", "study_names", "study_params", "study_summary"]
