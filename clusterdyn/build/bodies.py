@@ -316,6 +316,8 @@ def plate(material, r0, thickness, *, radius=None, width=None, axis=0, center=(0
           d_min=DEFAULT_D_MIN, target_porosity=None, mass="cluster"):
     """A plate of finite lateral size: ``thickness`` along ``axis``, round or rectangular.
 
+    Parameters not listed here are as for :func:`rod` (``center`` is the plate's centroid).
+
     Parameters
     ----------
     thickness : float
@@ -326,8 +328,6 @@ def plate(material, r0, thickness, *, radius=None, width=None, axis=0, center=(0
         A rectangular plate: widths along the two other axes in increasing
         order (e.g. axis z: x then y), Angstrom.  Give exactly one of
         ``radius`` and ``width``.
-
-    Other parameters as :func:`rod` (``center`` is the plate's centroid).
     """
     s = _sizes(r0=r0, thickness=thickness)
     ax = parse_axis(axis)
