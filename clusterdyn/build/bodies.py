@@ -521,6 +521,8 @@ def combine_bodies(bodies, *, min_distance=1.0):
         for key in ("material", "radius"):
             if key not in at.arrays:
                 raise InputError(f"bodies[{b}]", f"Atoms without arrays['{key}']", "clusters from clusterdyn.build")
+        if np.any(at.pbc):
+            raise InputError(f"bodies[{b}]", f"Atoms with pbc={at.pbc.tolist()}", "open bodies (pbc False)")
         if "bonds0" in at.arrays:
             raise InputError(f"bodies[{b}]", "Atoms with arrays['bonds0']",
                              "bodies without set-up bonds (call mark_initial_bonds on the combined Atoms)")

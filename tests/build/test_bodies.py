@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from clusterdyn import units
-from clusterdyn.build import grain_orientation, misorientation_angle
+from clusterdyn.build import fcc_packing, grain_orientation, misorientation_angle
 from clusterdyn.build.bodies import (combine_bodies, crystal_rotation, place, plane_spacing, plate, plate_stack,
                                      rod, sphere, translate)
 from clusterdyn.errors import InputError
@@ -186,6 +186,7 @@ def test_translate_keeps_info():
     (lambda: combine_bodies([sphere("Al", R0, 6 * R0), sphere("Pb", R0, 6 * R0, center=(3 * R0, 0, 0))]),
      "bodies"),
     (lambda: place(sphere("Al", R0, 4 * R0), sphere("Al", R0, 4 * R0), axis=0, gap=-R0), "gap"),
+    (lambda: combine_bodies([sphere("Al", R0, 4 * R0), fcc_packing("Al", R0, pbc=True)]), "bodies[1]"),
 ])
 def test_bad_input_refused_in_one_line(call, arg):
     with pytest.raises(InputError) as exc:
@@ -195,7 +196,6 @@ def test_bad_input_refused_in_one_line(call, arg):
 
 
 def test_combine_accepts_any_clusterdyn_atoms():
-    from clusterdyn.build import fcc_packing
     block = fcc_packing("Pb", 2 * R0, size=(3, 3, 3))                 # another r0: a third material id
     s = place(sphere("Al", R0, 5 * R0), block, axis=0, gap=0.0)
     p = plate("Al", R0, 2 * R0, radius=3 * R0, center=(-20 * R0, 0, 0))
