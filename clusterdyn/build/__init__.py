@@ -13,3 +13,10 @@ from .mca import mca_packing, notch, precrack  # noqa: E402,F401
 __all__ += ["mca_packing", "precrack", "notch"]
 from .two_phase import PAPER_CASES, two_phase  # noqa: E402
 __all__ += ["two_phase", "PAPER_CASES"]
+from .bodies import (combine_bodies, crystal_rotation, place, plate, plate_stack, rod, sphere,  # noqa: E402
+                     translate)
+__all__ += ["rod", "sphere", "plate", "plate_stack", "place", "translate", "combine_bodies", "crystal_rotation"]
+from .profiled import (Grooves, RandomRoughness, Sinusoid, profiled_sample, surface_amplitude,  # noqa: E402
+                       surface_heights, surface_roughness)
+__all__ += ["profiled_sample", "Sinusoid", "Grooves", "RandomRoughness", "surface_heights", "surface_amplitude",
+            "surface_roughness"]
