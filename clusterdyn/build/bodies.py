@@ -59,33 +59,12 @@ from scipy.spatial import cKDTree
 from .. import units
 from ..errors import InputError, check_positive
 from ..materials import get_material
-from .lattice import SQRT2, fcc_sites, make_cluster_atoms, orientation_matrix, parse_direction
+from .lattice import SQRT2, fcc_sites, make_cluster_atoms, orientation_matrix, parse_axis, parse_direction
 from .polycrystal import DEFAULT_D_MIN, polycrystal
-from .shapes import Box, Cylinder, Sphere
+from .shapes import Box, Cylinder, Sphere, _vec3
 
 #: the two mass choices (see the module docstring)
 MASS_CHOICES = ("cluster", "dense")
-_AXES = {"x": 0, "y": 1, "z": 2, 0: 0, 1: 1, 2: 2}
-#: arrays that combine_bodies renumbers; any other array is carried over unchanged
-_RENUMBERED = ("id", "body", "grain", "material")
-
-
-def parse_axis(axis):
-    """0, 1, 2 or 'x', 'y', 'z' -> 0, 1, 2."""
-    key = axis.lower() if isinstance(axis, str) else axis
-    if isinstance(key, (bool, np.bool_)) or key not in _AXES:
-        raise InputError("axis", axis, "0, 1, 2 or 'x', 'y', 'z'")
-    return _AXES[key]
-
-
-def _vec3(name, v):
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(name, v, "three finite numbers") from None
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise InputError(name, v, "three finite numbers")
-    return a
 
 
 def crystal_rotation(orientation=None, axis=0):

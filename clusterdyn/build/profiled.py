@@ -64,8 +64,8 @@ import numpy as np
 
 from ..errors import InputError, check_positive
 from ..materials import get_material
-from .bodies import crystal_rotation, parse_axis, plane_spacing
-from .lattice import ORIENTATIONS, SQRT2, fcc_sites, make_cluster_atoms, parse_direction, repeat_lengths
+from .bodies import crystal_rotation, plane_spacing
+from .lattice import ORIENTATIONS, parse_axis, SQRT2, fcc_sites, make_cluster_atoms, parse_direction, repeat_lengths
 
 #: number of sampling lengths in the evaluation length (ISO 4288's default)
 N_SAMPLING = 5

@@ -12,7 +12,10 @@ from ..errors import InputError
 
 
 def _vec3(name, v):
-    a = np.asarray(v, dtype=float)
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(name, v, "three finite numbers (Angstrom)") from None
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise InputError(name, v, "three finite numbers (Angstrom)")
     return a
