@@ -851,7 +851,9 @@ class H5MDWriter:
         if self._mass_fixed and self._mass_ref is not None \
                 and not np.array_equal(frame["mass"], self._mass_ref):
             raise InputError("atoms masses", "changed since the first frame",
-                             "fixed masses (stored once, as a time-independent H5MD element)")
+                             "fixed masses (stored once, as a time-independent H5MD element)",
+                             hint="each row must be the same particle in every frame: give the "
+                                  "Atoms an 'id' array (sort_by_id=True) if they are re-sorted")
 
         if self._last_step is not None and step < self._last_step:
             raise InputError("step", step, f"a step >= {self._last_step}, the last one stored",
