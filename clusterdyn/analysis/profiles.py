@@ -1,28 +1,27 @@
 """Binned profiles over a whole trajectory, as arrays ready to plot or write.
 
-:func:`trajectory_profiles` runs :func:`clusterdyn.analysis.slabs.stress_profile`
-on every frame with one fixed set of slabs (:class:`ProfileRecorder`, also usable
-as an observer during a run), and stacks the results:
-``stress[f, b, c]`` is component c (Voigt xx yy zz yz xz xy, lab frame) of
-slab b in frame f.  :func:`write_profiles_csv` writes one frame (or several)
-as CSV in GPa, um, m/s and g/cm3.
+:class:`TrajectoryProfiles` (an analysis in MDAnalysis' AnalysisBase shape:
+``TrajectoryProfiles(traj, ...).run(start, stop, step).results``) and its
+one-call form :func:`trajectory_profiles` run
+:func:`clusterdyn.analysis.slabs.stress_profile` on every frame with one
+fixed set of slabs (:class:`ProfileRecorder`, also usable as an observer
+during a run), and stack the results: ``stress[f, b, c]`` is component c
+(Voigt xx yy zz yz xz xy, lab frame) of slab b in frame f.  From an H5MD file
+they need nothing but the path: the calculator (and so the virials) is
+rebuilt from the file's metadata.  :func:`write_profiles_csv` writes one
+frame (or several) as CSV in GPa, um, m/s and g/cm3.
 """
 
 import csv
+import math
 
 import numpy as np
 
 from .. import units
 from ..errors import InputError
+from .base import TrajectoryAnalysis
 from .slabs import stress_profile
 from .stress import VOIGT_NAMES, particle_virials
-
-
-def _frames(trajectory):
-    if isinstance(trajectory, (str, bytes)) or hasattr(trajectory, "__fspath__"):
-        from ase.io import iread
-        return iread(str(trajectory), index=":")
-    return iter(trajectory)
 
 
 def _frame_virials(atoms, virials, calc):
@@ -97,16 +96,26 @@ class ProfileRecorder:
         return res
 
 
-def trajectory_profiles(trajectory, width, axis=0, lo=None, hi=None, virials=None, calc=None,
-                        times=None, exclude=None):
+class TrajectoryProfiles(TrajectoryAnalysis):
     """Stress, intensity, density and velocity profiles for every frame of a trajectory.
+
+    ``TrajectoryProfiles(trajectory, ...).run(start, stop, step)`` fills
+    ``results`` with the arrays listed under Returns of
+    :func:`trajectory_profiles`.
 
     Parameters
     ----------
-    trajectory : iterable of ase.Atoms, or a path ase.io can read
-        Frames (all with a 3-D cell; its cross-section is the slab area).
-    width : float
-        Slab width, Angstrom.
+    trajectory : path, H5MDReader, or sequence/iterable of ase.Atoms
+        Frames (all with a 3-D cell; its cross-section is the slab area).  An
+        H5MD file written by clusterdyn needs nothing else: the calculator
+        comes from its metadata (:meth:`clusterdyn.io.H5MDReader.calculator`).
+        Other paths are read with ``ase.io``.
+    width : float, optional
+        Slab width, Angstrom.  Default (H5MD files only): ``sqrt(2) r0`` of
+        the largest r0 of the material table, the fcc cube edge (two lattice
+        planes along [100]; the slab of the shock scene in that direction).
+    axis : int
+        Profile direction (0, 1, 2).
     lo, hi : float, optional
         Slab range along ``axis``; default the first frame's extent, widened
         by 20% on each side so that moving material stays inside.
@@ -115,25 +124,91 @@ def trajectory_profiles(trajectory, width, axis=0, lo=None, hi=None, virials=Non
         ``virials`` (or ``stresses`` times the volume), else ``calc``.
     calc : ASE calculator, optional
         Used on frames without stored virials (e.g. a ClusterDynamics).
+        Default for an H5MD file: the calculator rebuilt from the file.
     times : array, optional
-        Time of each frame (ASE units); default ``atoms.info['time']`` or the
-        frame index.
-    exclude : callable, optional
-        ``exclude(atoms) -> bool mask`` of particles left out (a piston).
+        Time of each analysed frame (ASE units); default
+        ``atoms.info['time']`` or the frame index.
+    exclude : callable, bool mask or "drives", optional
+        ``exclude(atoms) -> bool mask`` or a mask of particles left out (a
+        piston); ``"drives"``: the particles the file's stored constraints
+        and drives act on (H5MD files only).
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        No frames; an H5MD file without the metadata the defaults need (one
+        line naming the missing ``/parameters`` entries).
+    """
+
+    def __init__(self, trajectory, width=None, axis=0, lo=None, hi=None, virials=None, calc=None,
+                 times=None, exclude=None):
+        super().__init__(trajectory)
+        if axis not in (0, 1, 2):
+            raise InputError("axis", axis, "0, 1 or 2")
+        if width is not None and not (np.isfinite(width) and width > 0):
+            raise InputError("width", width, "a slab width > 0 (Angstrom)")
+        if isinstance(exclude, str) and exclude != "drives":
+            raise InputError("exclude", exclude, "a callable, a bool mask or 'drives'")
+        self.width, self.axis, self.lo, self.hi = width, axis, lo, hi
+        self.virials, self.calc, self.times, self.exclude = virials, calc, times, exclude
+
+    def _prepare(self):
+        reader = self.reader
+        width, calc = self.width, self.calc
+        if width is None:
+            if reader is None:
+                raise InputError("width", None, "a slab width (Angstrom); it has a default only "
+                                 "for H5MD files with a material table")
+            from ..io.metadata import materials_from_metadata
+            r0 = materials_from_metadata(reader.metadata, reader.path)[2]
+            if r0 is None:
+                raise InputError("width", None, "a slab width (Angstrom)",
+                                 hint=f"{reader.path} has no r0 in its material table")
+            width = math.sqrt(2.0) * max(r0)
+        if calc is None and self.virials is None and reader is not None:
+            calc = reader.calculator()
+        if self.exclude == "drives" and reader is None:
+            raise InputError("exclude", "drives", "a callable or a bool mask (\"drives\" needs an "
+                             "H5MD file with its constraints)")
+        self._calc = calc
+        self._rec = ProfileRecorder(width, self.axis, self.lo, self.hi)
+        self._n = 0
+
+    def _single_frame(self, atoms):
+        ex = self.exclude
+        if isinstance(ex, str):
+            ex = self.reader.drive_mask(self._frame_index)
+        elif callable(ex):
+            ex = ex(atoms)
+        t = self.times[self._n] if self.times is not None else \
+            atoms.info.get("time", float(self._frame_index))
+        self._rec.add(atoms, _frame_virials(atoms, self.virials, self._calc), t, exclude=ex)
+        self._n += 1
+
+    def _conclude(self):
+        self.results.update(self._rec.arrays())
+        self.results["frames"] = np.asarray(self.frames, dtype=np.int64)
+        self.results["width"] = self._rec.width
+
+
+def trajectory_profiles(trajectory, width=None, axis=0, lo=None, hi=None, virials=None, calc=None,
+                        times=None, exclude=None, start=None, stop=None, step=None):
+    """Stress, intensity, density and velocity profiles for every frame of a trajectory.
+
+    The one-call form of :class:`TrajectoryProfiles` (same parameters; see
+    there), ``TrajectoryProfiles(...).run(start, stop, step).results``.
+    ``trajectory_profiles("shock.h5md")`` works from the file alone.
 
     Returns
     -------
-    dict of arrays
+    Results (a dict with attribute access) of arrays
         ``t`` (nf,), ``x`` (nb,), ``edges`` (nb+1,), ``stress`` (nf, nb, 6)
         eV/A^3, ``von_mises`` (nf, nb), ``pressure`` (nf, nb), ``density``
-        (nf, nb) amu/A^3, ``velocity`` (nf, nb, 3) A/time, ``count`` (nf, nb).
+        (nf, nb) amu/A^3, ``velocity`` (nf, nb, 3) A/time, ``count`` (nf, nb),
+        ``frames`` (nf,) the trajectory indices analysed, ``width`` (A).
     """
-    rec = ProfileRecorder(width, axis, lo, hi)
-    for i, atoms in enumerate(_frames(trajectory)):
-        ex = exclude(atoms) if callable(exclude) else exclude
-        t = times[i] if times is not None else atoms.info.get("time", float(i))
-        rec.add(atoms, _frame_virials(atoms, virials, calc), t, exclude=ex)
-    return rec.arrays()
+    return TrajectoryProfiles(trajectory, width, axis, lo, hi, virials, calc, times,
+                              exclude).run(start, stop, step).results
 
 
 def write_profiles_csv(path, profiles, frames=None):

@@ -4,6 +4,11 @@
   (``particles/trajectory``; units MDAnalysis accepts).
 - :class:`H5MDReader`, :func:`read_h5md` -- frames back as :class:`ase.Atoms`.
 - :func:`h5md_info`, :func:`format_info` -- what ``clusterdyn info FILE`` shows.
+- :mod:`clusterdyn.io.metadata` -- the run's metadata under ``/parameters`` (material
+  table, r0, rc, damping, drives, units); :meth:`H5MDReader.calculator` rebuilds the
+  calculator from it, so analyses work from the file alone.
+- :func:`clusterdyn.io.mda.universe` -- an MDAnalysis Universe with masses, ids, material
+  and grain ids (imported on demand: it imports MDAnalysis).
 - :func:`write_checkpoint`, :func:`read_checkpoint` -- bit-exact restart files.
 """
 

@@ -16,7 +16,8 @@ File layout (``N`` particles, ``F`` frames)::
         velocity/{step,time,value (F, N, 3) float64 'Angstrom ps-1'}
         force/{step,time,value (F, N, 3) float64 'kJ mol-1 Angstrom-1'}  only with a calculator
         species/{step,time,value (F, N) int}            atomic numbers
-        mass/{step,time,value (F, N) float64 'u'}       amu
+        mass (N,) float64 'u'                           amu, time-independent (files written
+                                                         before: mass/{step,time,value (F, N)})
         <array>/{step,time,value (F, N, ...)}            every other atoms.arrays entry
                                                          (id, material, grain, radius, ...)
                                                          and every ``per_particle`` series,
@@ -24,8 +25,18 @@ File layout (``N`` particles, ``F`` frames)::
     /observables/<name>/{step,time,value (F, ...)}      dt ('ps'), kinetic_energy,
                                                          potential_energy, total_energy
                                                          ('kJ mol-1') + user ones
-    /parameters/scene          JSON text of ``parameters=``
-    /parameters/dynamics       JSON text of ``dyn.todict()`` (``set_description``)
+    /connectivity/linked_pairs                          MCA runs (``pair_state``) only
+        +particles_group (reference to particles/trajectory), +values 'id'
+        {step,time,value (F, P, 2) int64}               ids (i < j) of the linked pairs of
+                                                         each frame, sorted, padded with -1
+                                                         (P grows with the largest frame)
+    /parameters                H5MD's parameters group: the run's metadata
+        scene                  JSON text of ``parameters=``
+        dynamics               JSON text of ``dyn.todict()`` (``set_description``)
+        calculator, materials, damping, units, constraints/<k>/{description, ids}
+                               the calculator with its material table, the damping J,
+                               drives and walls, the unit system: see
+                               :mod:`clusterdyn.io.metadata`
 
 ``step`` (int64) and ``time`` (float64, 'ps') exist once, in ``position``,
 and are hard-linked into every other time-dependent group (as MDAnalysis's
@@ -70,6 +81,8 @@ from clusterdyn import units
 from clusterdyn.errors import InputError
 from clusterdyn.io._common import (clusterdyn_version, dumps, open_h5_read,
                                    read_json_dataset)
+from clusterdyn.io.metadata import (calculator_from_metadata, materials_from_metadata,
+                                    read_metadata, run_metadata, write_metadata)
 
 __all__ = ["H5MDWriter", "H5MDReader", "read_h5md"]
 
@@ -110,6 +123,7 @@ STANDARD_ARRAYS = ("positions", "numbers", "momenta", "masses")
 DEFAULT_OBSERVABLES = ("dt", "kinetic_energy", "potential_energy", "total_energy")
 
 _TRAJ = "particles/trajectory"
+_PAIRS = "connectivity/linked_pairs"
 _MAX_CHUNK_BYTES = 1 << 20
 
 
@@ -244,6 +258,15 @@ class H5MDWriter:
         Scene parameters, stored as JSON text in ``/parameters/scene``.
     author : str, optional
         Stored in ``/h5md/author``; default: the login name.
+    wrap : bool
+        Write periodic coordinates wrapped into the box with an ``image``
+        series (default), or as ``atoms.positions`` holds them.
+    pair_state : None, False or callable, optional
+        Linked pairs written on every frame under
+        ``/connectivity/linked_pairs``: a ``callable(atoms) -> (P, 2)``
+        array of particle ids; None (default) takes
+        ``atoms.calc.state.linked_pairs()`` when the calculator's state has
+        it (MCA), else writes none; False writes none.
 
     Notes
     -----
@@ -252,6 +275,13 @@ class H5MDWriter:
     replaces it (a restarted run re-emitting its first frame does not
     duplicate it); a step below the last stored one raises
     :class:`~clusterdyn.errors.InputError`, since H5MD steps must increase.
+
+    The run's metadata (calculator, material table, r0, damping, drives and
+    walls, units) goes under ``/parameters`` when the writer is made and
+    again at its first frame (:meth:`write_metadata`), so that
+    :class:`H5MDReader` can rebuild the calculator and analyses can run from
+    the file alone.  Masses are stored once; a frame whose masses differ from
+    the first frame's raises :class:`~clusterdyn.errors.InputError`.
 
     Forces come from the calculator's result cache when it is valid
     (``calc.get_property('forces', atoms, allow_calculation=False)``), as
@@ -262,7 +292,8 @@ class H5MDWriter:
 
     def __init__(self, path, atoms, *, mode="w", dyn=None, timestep=None,
                  observables=None, per_particle=None, compression="gzip",
-                 sort_by_id=True, restart_step=None, parameters=None, author=None, wrap=True):
+                 sort_by_id=True, restart_step=None, parameters=None, author=None, wrap=True,
+                 pair_state=None):
         import h5py
 
         if mode not in ("w", "a"):
@@ -282,6 +313,10 @@ class H5MDWriter:
             raise InputError("timestep", timestep, "a finite time > 0 in ASE units")
         if len(atoms) == 0:
             raise InputError("atoms", atoms, "at least one particle")
+        if not (pair_state is None or pair_state is False or callable(pair_state)):
+            raise InputError("pair_state", pair_state,
+                             "None (the linked pairs of an MCA calculator's state, if any), False "
+                             "(none) or a callable(atoms) -> (P, 2) particle ids")
 
         self.path = str(path)
         self.atoms = atoms
@@ -313,6 +348,9 @@ class H5MDWriter:
                                      f"a key of atoms.arrays {sorted(atoms.arrays)}")
 
         self._pbc = np.array(atoms.pbc, dtype=bool)
+        self._pair_state_arg = pair_state
+        self._mass_fixed = True  # masses stored once (time-independent); files before: per frame
+        self._mass_ref = None
         self._layout = None      # set on the first frame (mode 'w') or from the file ('a')
         self._warned = set()
 
@@ -335,6 +373,10 @@ class H5MDWriter:
                     self.set_description(dyn.todict())
                 except Exception:  # pragma: no cover - a todict that fails is not fatal
                     pass
+            try:
+                self.write_metadata()
+            except InputError:
+                pass             # written again at the first frame, where an error is raised
             self._file.flush()
         except BaseException:
             self._file.close()
@@ -384,11 +426,15 @@ class H5MDWriter:
         self._time_ds = traj["position/time"]
         self._nframes = int(self._step_ds.shape[0])
         self._last_step = int(self._step_ds[-1]) if self._nframes else None
+        self._mass_fixed = "mass" in traj and not isinstance(traj["mass"], _h5group())
+        if self._mass_fixed:
+            self._mass_ref = np.asarray(traj["mass"][()], dtype=np.float64)
         # the layout stored in the file
         layout = {"edges": "edges" in traj["box"],
                   "particles": [k for k in traj if k != "box" and isinstance(traj[k], _h5group())
                                 and "value" in traj[k]],
-                  "observables": list(f["observables"]) if "observables" in f else []}
+                  "observables": list(f["observables"]) if "observables" in f else [],
+                  "pairs": _PAIRS in f}
         self._file_layout = layout
         if restart_step is not None:
             self.truncate_after_step(restart_step)
@@ -408,6 +454,17 @@ class H5MDWriter:
             JSON-able mapping; numpy values are converted.
         """
         self._write_json("dynamics", description)
+        self._file.flush()
+
+    def write_metadata(self):
+        """Store the run's metadata under ``/parameters`` (see :mod:`clusterdyn.io.metadata`).
+
+        Called when the writer is made and again at its first frame (so a
+        calculator or constraints attached in between are described): the
+        calculator and its material table, the dynamics' damping, the
+        constraints and drives, and the unit system.
+        """
+        write_metadata(self._file, run_metadata(self.atoms, self.dyn))
         self._file.flush()
 
     # --------------------------------------------------------------- sources
@@ -457,11 +514,26 @@ class H5MDWriter:
                 "force": has_force,
                 "image": self.wrap,
                 "particles": self._particle_specs(atoms),
-                "observables": self._observable_specs(atoms)}
+                "observables": self._observable_specs(atoms),
+                "pairs": self._pair_source(atoms)}
+
+    def _pair_source(self, atoms):
+        """callable(atoms) -> (P, 2) ids of linked pairs, or None (see ``pair_state``)."""
+        arg = self._pair_state_arg
+        if arg is False:
+            return None
+        if callable(arg):
+            return arg
+        # duck-typed: an MCA calculator's state exposes linked_pairs()
+        if callable(getattr(getattr(atoms.calc, "state", None), "linked_pairs", None)):
+            return lambda a: a.calc.state.linked_pairs()
+        return None
 
     def _check_layout_against_file(self, layout):
         fl = self._file_layout
-        want_p = {"position", "velocity", "species", "mass"} | set(layout["particles"])
+        want_p = {"position", "velocity", "species"} | set(layout["particles"])
+        if not self._mass_fixed:
+            want_p.add("mass")
         if layout["force"]:
             want_p.add("force")
         if layout["image"]:
@@ -481,6 +553,10 @@ class H5MDWriter:
             if have_o - want_o:
                 problems.append(f"observables in the file this writer would not write: "
                                 f"{sorted(have_o - want_o)}")
+        if (layout["pairs"] is not None) != fl["pairs"]:
+            problems.append("linked pairs (connectivity) " + (
+                "missing from the file" if layout["pairs"] is not None
+                else "in the file but this writer has no pair state"))
         if layout["edges"] != fl["edges"]:
             problems.append("box/edges " + ("missing from the file" if layout["edges"]
                                             else "in the file but the cell is zero"))
@@ -532,13 +608,37 @@ class H5MDWriter:
         if "image" in frame:
             self._new_value(traj, "image", frame["image"])
         self._new_value(traj, "species", frame["species"])
-        self._new_value(traj, "mass", frame["mass"], UNITS["mass"])
+        if self._mass_fixed:     # time-independent H5MD element: one (N,) dataset
+            if "mass" in traj:
+                del traj["mass"]
+            traj.create_dataset("mass", data=frame["mass"]).attrs["unit"] = UNITS["mass"]
+            self._mass_ref = np.array(frame["mass"])
+        else:
+            self._new_value(traj, "mass", frame["mass"], UNITS["mass"])
+        if "pairs" in frame:
+            self._new_pairs(frame["pairs"])
         for name, (_, unit) in self._layout["particles"].items():
             self._new_value(traj, name, frame["particles"][name], unit)
         if self._layout["observables"]:
             obs = f.require_group("observables")
             for name, (_, unit) in self._layout["observables"].items():
                 self._new_value(obs, name, frame["observables"][name], unit, compress=False)
+
+    def _new_pairs(self, pairs):
+        """``/connectivity/linked_pairs``: (F, P, 2) int64 ids padded with -1, P grows."""
+        f = self._file
+        g = f.require_group(_PAIRS)
+        width = max(1024, min(len(pairs), 65536))
+        kw = {}
+        if self.compression is not None:
+            kw = {"compression": self.compression, "shuffle": True}
+        ds = g.create_dataset("value", shape=(0, len(pairs), 2), maxshape=(None, None, 2),
+                              dtype=np.int64, chunks=(1, width, 2), fillvalue=-1, **kw)
+        ds.attrs["fill_value"] = -1
+        g.attrs["particles_group"] = f[_TRAJ].ref
+        g.attrs["values"] = "id"       # entries are particle ids (particles/trajectory/id)
+        g["step"] = self._step_ds
+        g["time"] = self._time_ds
 
     def _value_datasets(self):
         f = self._file
@@ -547,6 +647,8 @@ class H5MDWriter:
                and "value" in traj[k]]
         if "edges" in traj["box"]:
             out.append(traj["box/edges/value"])
+        if _PAIRS in f:
+            out.append(f[_PAIRS]["value"])
         if "observables" in f:
             out += [f["observables"][k]["value"] for k in f["observables"]
                     if "value" in f["observables"][k]]
@@ -671,6 +773,13 @@ class H5MDWriter:
                                  f"an array of shape ({n}, ...)")
             parts[name] = rows(val)
         frame["particles"] = parts
+        if layout["pairs"] is not None:
+            pairs = np.asarray(layout["pairs"](atoms))
+            if pairs.dtype.kind not in "iu" or pairs.ndim != 2 or pairs.shape[1] != 2:
+                raise InputError("pair_state", f"array of dtype {pairs.dtype}, shape {pairs.shape}",
+                                 "integer particle ids of shape (P, 2)")
+            pairs = np.sort(pairs.astype(np.int64), axis=1)
+            frame["pairs"] = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
         obs = {}
         for name, (func, _) in layout["observables"].items():
             if func is None:                       # dt: set by write()
@@ -688,7 +797,9 @@ class H5MDWriter:
     def _check_shapes(self, frame):
         traj = self._file[_TRAJ]
         items = [("position", frame["position"], traj), ("velocity", frame["velocity"], traj),
-                 ("species", frame["species"], traj), ("mass", frame["mass"], traj)]
+                 ("species", frame["species"], traj)]
+        if not self._mass_fixed:
+            items.append(("mass", frame["mass"], traj))
         if "force" in frame:
             items.append(("force", frame["force"], traj))
         if "image" in frame:
@@ -734,8 +845,15 @@ class H5MDWriter:
             layout = self._make_layout(atoms)
             if hasattr(self, "_file_layout"):
                 self._check_layout_against_file(layout)
+            self.write_metadata()
             self._layout = layout
         frame = self._collect(atoms)
+        if self._mass_fixed and self._mass_ref is not None \
+                and not np.array_equal(frame["mass"], self._mass_ref):
+            raise InputError("atoms masses", "changed since the first frame",
+                             "fixed masses (stored once, as a time-independent H5MD element)",
+                             hint="each row must be the same particle in every frame: give the "
+                                  "Atoms an 'id' array (sort_by_id=True) if they are re-sorted")
 
         if self._last_step is not None and step < self._last_step:
             raise InputError("step", step, f"a step >= {self._last_step}, the last one stored",
@@ -758,7 +876,16 @@ class H5MDWriter:
         traj["position/value"][i] = frame["position"]
         traj["velocity/value"][i] = frame["velocity"]
         traj["species/value"][i] = frame["species"]
-        traj["mass/value"][i] = frame["mass"]
+        if not self._mass_fixed:
+            traj["mass/value"][i] = frame["mass"]
+        if "pairs" in frame:
+            ds = f[_PAIRS]["value"]
+            p = frame["pairs"]
+            if len(p) > ds.shape[1]:
+                ds.resize(len(p), axis=1)
+            row = np.full((ds.shape[1], 2), -1, dtype=np.int64)
+            row[:len(p)] = p
+            ds[i] = row
         if "edges" in frame:
             traj["box/edges/value"][i] = frame["edges"]
         if "force" in frame:
@@ -849,6 +976,11 @@ def _unit_factor(kind, ds, path):
 class H5MDReader:
     """Read frames of an H5MD file (ours or any with ``particles/<group>``) as ASE Atoms.
 
+    Besides the frames it gives the run's metadata (:attr:`metadata`), the
+    material table (:meth:`materials`), a calculator rebuilt from the file
+    (:meth:`calculator`), the particles held by drives (:meth:`drive_mask`)
+    and, for MCA runs, the linked pairs of every frame (:meth:`linked_pairs`).
+
     Parameters
     ----------
     path : str or os.PathLike
@@ -887,6 +1019,11 @@ class H5MDReader:
             self._g = g
             self._elements = [k for k in g if k != "box" and isinstance(g[k], _h5group())
                               and "value" in g[k]]
+            # masses: one time-independent (N,) dataset, or per frame in older files
+            self._mass_ds = g["mass"] if "mass" in g and not isinstance(g["mass"], _h5group()) \
+                else None
+            self._meta = None
+            self._mat_info = None
             first = next((k for k in ("position", "velocity", "force") if k in g), None)
             if first is None:
                 if "h5md" not in self._file:
@@ -941,7 +1078,9 @@ class H5MDReader:
         """Which of position, velocity, force, species, mass, box edges are stored."""
         out = {k: k in self._elements
                for k in ("position", "velocity", "force", "species", "mass")}
+        out["mass"] = out["mass"] or self._mass_ds is not None
         out["edges"] = "box" in self._g and "edges" in self._g["box"]
+        out["pairs"] = _PAIRS in self._file
         return out
 
     @property
@@ -963,6 +1102,108 @@ class H5MDReader:
         return read_json_dataset(self._file.get("parameters"), "dynamics")
 
     @property
+    def metadata(self):
+        """The run's metadata (:func:`clusterdyn.io.metadata.read_metadata`), a dict.
+
+        ``scene``, ``dynamics``, ``calculator``, ``materials`` (the material
+        table), ``damping`` and ``J``, ``units``, ``constraints`` (drives and
+        walls, with the ``ids`` they act on), ``creator``, ``version``;
+        sections the file lacks are None.
+        """
+        if self._meta is None:
+            self._meta = read_metadata(self._file)
+        return self._meta
+
+    def materials(self):
+        """Material records of the stored material table, indexed by material id.
+
+        Raises
+        ------
+        clusterdyn.errors.InputError
+            The file has no material table (written without the run's metadata).
+        """
+        return materials_from_metadata(self.metadata, self.path)[1]
+
+    def calculator(self):
+        """A new ClusterDynamics with the stored rc, skin, n_table, attraction and material table.
+
+        It gives the same forces, energies and virials on the stored frames as
+        the run's calculator (to the round-off of the stored positions).
+
+        Raises
+        ------
+        clusterdyn.errors.InputError
+            The file lacks the calculator or material metadata, or the run's
+            calculator was not a ClusterDynamics.
+        """
+        return calculator_from_metadata(self.metadata, self.path)
+
+    def drive_mask(self, frame=0):
+        """(N,) bool: the rows of ``frame`` that a stored constraint or drive acts on.
+
+        Raises
+        ------
+        clusterdyn.errors.InputError
+            The file has no constraint metadata, or it names particle ids and
+            the file has no ``id`` series.
+        """
+        meta = self.metadata
+        if meta["constraints"] is None:
+            raise InputError("path", self.path, "an H5MD file with /parameters/constraints",
+                             hint="missing /parameters/constraints, needed for the driven "
+                                  "particles; the file was written without the run's metadata")
+        i = self._index(frame)
+        mask = np.zeros(self.n_particles, dtype=bool)
+        for c in meta["constraints"]:
+            ids = c.get("ids")
+            if ids is None:
+                continue
+            if c.get("particles") == "row":
+                mask[ids] = True
+                continue
+            if "id" not in self._elements:
+                raise InputError("path", self.path, "an H5MD file with an 'id' series",
+                                 hint="the stored constraints name particle ids")
+            mask |= np.isin(self._g["id"]["value"][i], ids)
+        return mask
+
+    def linked_pairs(self, frame=-1):
+        """(P, 2) int64 particle ids (i < j) of the pairs linked at ``frame`` (MCA pair state).
+
+        Raises
+        ------
+        clusterdyn.errors.InputError
+            The file holds no pair state (not an MCA run, or written before it was stored).
+        """
+        if _PAIRS not in self._file:
+            raise InputError("path", self.path, f"an H5MD file with /{_PAIRS}",
+                             hint=f"missing /{_PAIRS} (the MCA pair state per frame): not an "
+                                  "MCA run, or written before the pair state was stored")
+        i = self._index(frame)
+        row = np.asarray(self._file[_PAIRS]["value"][i], dtype=np.int64)
+        return row[row[:, 0] >= 0]
+
+    def _material_info(self):
+        """{info key: value} for frames: cd_materials/cd_r0 or mca_materials/mca_dim (cached)."""
+        if self._mat_info is None:
+            meta = self.metadata
+            info = {}
+            calc = meta.get("calculator") or {}
+            if meta.get("materials") is not None:
+                try:
+                    names, _, r0 = materials_from_metadata(meta, self.path)
+                except InputError:
+                    names = r0 = None   # analysis asking for the calculator gets the error
+                if names is not None and calc.get("class") == "ClusterDynamics" and r0 is not None:
+                    info = {"cd_materials": names, "cd_r0": r0}
+                elif names is not None and calc.get("class") == "MCA":
+                    info = {"mca_materials": names}
+                    if calc.get("dim") is not None:
+                        info["mca_dim"] = int(calc["dim"])
+            self._mat_info = info
+        return self._mat_info
+
+    @property
     def creator(self):
         h = self._file.get("h5md")
         if h is None or "creator" not in h:
@@ -977,6 +1218,9 @@ class H5MDReader:
             u = self._g[k]["value"].attrs.get("unit")
             if u is not None:
                 out[k] = u.decode() if isinstance(u, bytes) else str(u)
+        if self._mass_ds is not None and "unit" in self._mass_ds.attrs:
+            u = self._mass_ds.attrs["unit"]
+            out["mass"] = u.decode() if isinstance(u, bytes) else str(u)
         if self._first is not None and "time" in self._first \
                 and "unit" in self._first["time"].attrs:
             out["time"] = str(self._first["time"].attrs["unit"])
@@ -1024,7 +1268,9 @@ class H5MDReader:
         every extra per-particle series (``atoms.arrays``) of that frame;
         stored forces and ``potential_energy`` are attached through a
         :class:`~ase.calculators.singlepoint.SinglePointCalculator`.
-        ``atoms.info`` gets ``step``, ``time`` (ASE units) and ``frame``.
+        ``atoms.info`` gets ``step``, ``time`` (ASE units) and ``frame``,
+        and the material table's ``cd_materials`` / ``cd_r0`` (or
+        ``mca_materials`` / ``mca_dim``) when the file stores it.
         """
         from ase import Atoms
         from ase.calculators.singlepoint import SinglePointCalculator
@@ -1052,8 +1298,12 @@ class H5MDReader:
             if "image" in self._elements:          # back to unwrapped positions
                 pos = pos + g["image"]["value"][i].astype(np.float64) @ cell
             atoms = Atoms(numbers=numbers, positions=pos, cell=cell, pbc=self.pbc)
-            if "mass" in self._elements:
-                atoms.set_masses(g["mass"]["value"][i].astype(np.float64))
+            if self._mass_ds is not None:
+                atoms.set_masses(np.asarray(self._mass_ds[()], dtype=np.float64)
+                                 * _unit_factor("mass", self._mass_ds, self.path))
+            elif "mass" in self._elements:
+                atoms.set_masses(g["mass"]["value"][i].astype(np.float64)
+                                 * _unit_factor("mass", g["mass"]["value"], self.path))
             if "velocity" in self._elements:
                 vel = g["velocity"]["value"][i].astype(np.float64) \
                     * _unit_factor("velocity", g["velocity"]["value"], self.path)
@@ -1078,6 +1328,8 @@ class H5MDReader:
             atoms.info["step"] = int(self.steps[i])
             atoms.info["time"] = float(self.times[i])
             atoms.info["frame"] = i
+            for k, v in self._material_info().items():
+                atoms.info[k] = list(v) if isinstance(v, list) else v
         except InputError:
             raise
         except (KeyError, OSError, ValueError, IndexError) as exc:
@@ -1124,8 +1376,12 @@ def read_h5md(path, frame=-1):
         (amu), numbers, cell, pbc, ``arrays`` for every stored extra
         per-particle series (``id``, ``material``, ...), forces (eV/Å) and
         potential energy (eV) on a SinglePointCalculator when stored, and
-        ``info['step']``, ``info['time']`` (ASE units), ``info['frame']``.
-        With ``sort_by_id`` the rows are in increasing id order.
+        ``info['step']``, ``info['time']`` (ASE units), ``info['frame']``,
+        and, from the stored material table, ``info['cd_materials']`` and
+        ``info['cd_r0']`` (CD) or ``info['mca_materials']`` and
+        ``info['mca_dim']`` (MCA), so a ClusterDynamics attached to the Atoms
+        needs no arguments.  With ``sort_by_id`` the rows are in increasing id
+        order.
 
     Raises
     ------

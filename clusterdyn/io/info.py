@@ -27,7 +27,10 @@ def h5md_info(path):
         position, velocity, force, ...), ``per_particle`` (the extra ones),
         ``observables`` (names), ``units`` ({series: unit string}),
         ``parameters`` and ``description`` (stored scene parameters and
-        dynamics description, or None).
+        dynamics description, or None), ``metadata`` (the run's metadata,
+        :attr:`clusterdyn.io.H5MDReader.metadata`, with each constraint's
+        ``ids`` replaced by their count ``n_particles``), ``pair_state``
+        (whether the MCA linked pairs are stored per frame).
 
     Raises
     ------
@@ -58,7 +61,95 @@ def h5md_info(path):
             "units": r.units(),
             "parameters": r.parameters,
             "description": r.description,
+            "metadata": _jsonable_metadata(r.metadata),
+            "pair_state": bool(has["pairs"]),
         }
+
+
+def _jsonable_metadata(meta):
+    out = {k: v for k, v in meta.items() if k not in ("scene", "dynamics", "constraints")}
+    cons = meta.get("constraints")
+    if cons is not None:
+        cons = [{**{k: v for k, v in c.items() if k != "ids"},
+                 **({"n_particles": int(len(c["ids"]))} if c.get("ids") is not None else {})}
+                for c in cons]
+    out["constraints"] = cons
+    return out
+
+
+def _fmt(x, unit, scale):
+    return "?" if not isinstance(x, (int, float)) else f"{x / scale:.6g} {unit}"
+
+
+def _material_line(m):
+    text = f"{m.get('id', '?')} {m.get('name', '?')}: rho0 {_fmt(m.get('rho0'), 'g/cm3', units.g_cm3)}"
+    if "c0" in m:
+        text += f", c0 {_fmt(m['c0'], 'km/s', units.km_s)}"
+    if "r0" in m:
+        text += f", r0 {_fmt(m['r0'], 'um', units.um)}"
+    curve = m.get("curve")
+    if curve:
+        kind = curve.get("kind")
+        if kind == "murnaghan":
+            text += f", Murnaghan cold curve (n {curve['n']:.6g})"
+        elif kind == "tabulated":
+            text += (f", tabulated cold curve ({len(curve['delta'])} rows, Tait tail n1 "
+                     f"{curve.get('n_tail', float('nan')):.3g})")
+        else:
+            text += f", cold curve {kind}"
+    if m.get("E") is not None:
+        text += f", E {_fmt(m['E'], 'GPa', units.GPa)}"
+    if m.get("nu") is not None:
+        text += f", nu {m['nu']:.6g}"
+    if m.get("response"):
+        text += f", {m['response']}"
+    return text
+
+
+def _metadata_lines(meta):
+    """Lines of ``clusterdyn info`` about the run's metadata."""
+    missing = [k for k in ("calculator", "materials", "damping", "constraints") if meta.get(k) is None]
+    lines = []
+    c = meta.get("calculator")
+    if c:
+        if c.get("class") == "ClusterDynamics":
+            lines.append(f"calculator:   ClusterDynamics, rc {c['rc']:.6g} r0, skin "
+                         f"{c['skin_effective']:.6g} r0{'' if c.get('skin') is not None else ' (default)'}"
+                         f", n_table {c['n_table']}, attraction {c['attraction']}")
+        elif c.get("class") == "MCA":
+            lines.append(f"calculator:   MCA, dim {c.get('dim')}"
+                         + (f", {len(c['interfaces'])} interface strengths" if c.get("interfaces") else ""))
+        else:
+            lines.append(f"calculator:   {c.get('class')}")
+    mats = meta.get("materials")
+    if mats:
+        lines.append("materials:    " + _material_line(mats[0]))
+        lines += ["              " + _material_line(m) for m in mats[1:]]
+    d = meta.get("damping")
+    if d is not None:
+        if "J" in d:
+            lines.append("damping:      " + ("off (J None)" if d["J"] is None
+                                             else f"J = {d['J']:.6g} (Gamma = c0/(J r0))"))
+        elif "damping" in d:
+            lines.append(f"damping:      {d['damping']:.6g} of critical (relative pair velocity)")
+    cons = meta.get("constraints")
+    if cons is not None:
+        if not cons:
+            lines.append("drives:       none")
+        for k, con in enumerate(cons):
+            if "repr" in con and "attributes" in con:     # no describe(): class and attributes
+                text = con["class"] + "(" + ", ".join(f"{a}={b}" for a, b in
+                                                      con["attributes"].items()) + ")"
+            else:
+                text = ", ".join(f"{a}={b}" for a, b in con.items()
+                                 if a not in ("ids", "particles", "n_particles"))
+            n = len(con["ids"]) if con.get("ids") is not None else con.get("n_particles")
+            lines.append(("drives:       " if k == 0 else "              ") + text
+                         + (f" [acts on {n} particles]" if n is not None else ""))
+    if missing:
+        lines.append("metadata:     missing " + ", ".join(missing)
+                     + " (written without the run's metadata: analyses need calc= or virials=)")
+    return lines
 
 
 def _fmt_time(t_ps):
@@ -84,7 +175,9 @@ def format_info(path):
     str
         Several lines: file and creator, frames and step range, time span,
         particles and periodicity, stored series with units, observables
-        (with their last value), and the stored dynamics description.
+        (with their last value), the stored dynamics description, and the
+        run's metadata: calculator (rc, skin, n_table, attraction), material
+        table (rho0, c0, r0, cold curve), damping J, drives and walls.
     """
     d = h5md_info(path)
     lines = [f"file:         {d['path']} ({d['size_bytes'] / 1e6:.3g} MB)"]
@@ -130,4 +223,7 @@ def format_info(path):
     if d["parameters"]:
         keys = ", ".join(sorted(d["parameters"])) if isinstance(d["parameters"], dict) else ""
         lines.append(f"parameters:   {keys}")
+    lines += _metadata_lines(d["metadata"])
+    if d["pair_state"]:
+        lines.append("pair state:   linked pairs per frame (connectivity/linked_pairs)")
     return "\n".join(lines)

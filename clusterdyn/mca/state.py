@@ -287,6 +287,14 @@ class MCAState:
 
     version_pairs = 0
 
+    def linked_pairs(self):
+        """(P, 2) int64 stable ids (i < j) of the pairs linked now (the bond graph).
+
+        What :class:`clusterdyn.io.H5MDWriter` stores on every frame, so that
+        fragments (connected components) can be computed from a file.
+        """
+        return self.pid_p2[self.linked_p == 1].copy()
+
     def per_atom(self, name, atoms):
         """A per-automaton state array reordered to the rows of ``atoms``."""
         return getattr(self, name)[self.pair_rows(atoms)[5]]

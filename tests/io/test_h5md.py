@@ -82,10 +82,10 @@ def test_file_layout_units_and_hard_links(md_file):
             assert v.shape == (6, n, 3) and v.dtype == np.float64
             assert v.maxshape[0] is None and v.chunks is not None and v.compression == "gzip"
         assert t["species/value"].shape == (6, n)
-        assert t["mass/value"].shape == (6, n)
+        assert t["mass"].shape == (n,) and t["mass"].attrs["unit"] == "u"   # time-independent
         assert set(t) >= {"id", "material"}
         # step/time exist once and are hard-linked everywhere (same HDF5 object)
-        for g in ("velocity", "force", "species", "mass", "id", "material", "box/edges"):
+        for g in ("velocity", "force", "species", "id", "material", "box/edges"):
             assert t[g]["step"] == t["position/step"] and t[g]["time"] == t["position/time"]
         for name in ("kinetic_energy", "potential_energy", "total_energy"):
             obs = f["observables"][name]
@@ -406,7 +406,7 @@ def test_sigkill_leaves_readable_file(tmp_path):
             np.testing.assert_array_equal(t["position/value"][k], base + 0.01 * k)
             np.testing.assert_allclose(t["velocity/value"][k], 1e-3 * k * cu.VEL_TO_A_PER_PS)
         np.testing.assert_array_equal(f["observables/k/value"][:], np.arange(nf))
-        for name in ("velocity", "species", "mass", "box/edges"):
+        for name in ("velocity", "species", "box/edges"):
             assert t[name]["value"].shape[0] == nf
     u = universe(path)
     assert u.trajectory.n_frames == nf
