@@ -282,7 +282,7 @@ def test_file_without_metadata_one_line_error(tmp_path):
 
 
 def test_mca_pair_state_every_frame(tmp_path):
-    from clusterdyn.mca.experiments import fragments, uniaxial
+    from clusterdyn.scenes.mca_experiments import fragments, uniaxial
     captured, live = {}, []
 
     def record():
