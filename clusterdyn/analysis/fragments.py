@@ -46,6 +46,7 @@ feed an H5MD writer).
 
 import csv
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -66,70 +67,79 @@ G_MAX = 10
 
 # ----------------------------------------------------------------------------- numba kernels
 # One union-find: _find / _union are shared by both pair sources (cell list, explicit pairs).
+# A particle's lattice image relative to its parent is packed in one int64, three signed
+# 21-bit fields (x * 2^42 + y * 2^21 + z): packed images add as integers, so path halving
+# costs one extra add and store.  |image| < 2^20 per axis (checked by the caller).
+
+IMG_BITS = 21
+IMG_LIMIT = 1 << (IMG_BITS - 1)
+
 
 @njit(inline="always")
-def _find(parent_n, off_n3, i):
-    """Root of ``i`` and the image of ``i`` relative to it (path halving keeps offsets exact)."""
-    k0 = 0
-    k1 = 0
-    k2 = 0
+def _pack(k0, k1, k2):
+    return (k0 << 42) + (k1 << 21) + k2
+
+
+@njit(inline="always")
+def _unpack(k):
+    """(k0, k1, k2) of a packed image (signed fields)."""
+    h = np.int64(1 << 20)
+    m = np.int64((1 << 21) - 1)
+    k2 = ((k + h) & m) - h
+    r = (k - k2) >> 21
+    k1 = ((r + h) & m) - h
+    k0 = (r - k1) >> 21
+    return k0, k1, k2
+
+
+@njit(inline="always")
+def _find(parent_n, off_n, i):
+    """Root of ``i`` and the packed image of ``i`` relative to it (path halving keeps offsets exact)."""
+    k = np.int64(0)
     while True:
         p = parent_n[i]
         if p == i:
-            return i, k0, k1, k2
+            return i, k
         gp = parent_n[p]
         if gp != p:
-            off_n3[i, 0] += off_n3[p, 0]
-            off_n3[i, 1] += off_n3[p, 1]
-            off_n3[i, 2] += off_n3[p, 2]
+            off_n[i] += off_n[p]
             parent_n[i] = gp
-        k0 += off_n3[i, 0]
-        k1 += off_n3[i, 1]
-        k2 += off_n3[i, 2]
+        k += off_n[i]
         i = parent_n[i]
 
 
 @njit(inline="always")
-def _union(parent_n, size_n, off_n3, perc_n3, i, j, s0, s1, s2):
-    """Join i and j, bonded with j at image (s0, s1, s2) relative to i (k_j - k_i = s)."""
-    ri, a0, a1, a2 = _find(parent_n, off_n3, i)
-    rj, b0, b1, b2 = _find(parent_n, off_n3, j)
+def _union(parent_n, size_n, off_n, perc_n, i, j, s):
+    """Join i and j, bonded with j at packed image s relative to i (k_j - k_i = s)."""
+    ri, a = _find(parent_n, off_n, i)
+    rj, b = _find(parent_n, off_n, j)
     if ri == rj:
         # a cycle: its images must add to zero, else the fragment meets its own image
-        if b0 - a0 != s0:
-            perc_n3[ri, 0] = True
-        if b1 - a1 != s1:
-            perc_n3[ri, 1] = True
-        if b2 - a2 != s2:
-            perc_n3[ri, 2] = True
+        if b - a != s:
+            d0, d1, d2 = _unpack(b - a - s)
+            perc_n[ri] |= (d0 != 0) | ((d1 != 0) << 1) | ((d2 != 0) << 2)
         return
     if size_n[ri] >= size_n[rj]:
         # rj under ri: in ri's frame k_j = a + s, and k_j = off[rj] + b
         parent_n[rj] = ri
-        off_n3[rj, 0] = a0 + s0 - b0
-        off_n3[rj, 1] = a1 + s1 - b1
-        off_n3[rj, 2] = a2 + s2 - b2
+        off_n[rj] = a + s - b
         size_n[ri] += size_n[rj]
-        for d in range(3):
-            perc_n3[ri, d] = perc_n3[ri, d] or perc_n3[rj, d]
+        perc_n[ri] |= perc_n[rj]
     else:
         parent_n[ri] = rj
-        off_n3[ri, 0] = b0 - s0 - a0
-        off_n3[ri, 1] = b1 - s1 - a1
-        off_n3[ri, 2] = b2 - s2 - a2
+        off_n[ri] = b - s - a
         size_n[rj] += size_n[ri]
-        for d in range(3):
-            perc_n3[rj, d] = perc_n3[rj, d] or perc_n3[ri, d]
+        perc_n[rj] |= perc_n[ri]
 
 
 @njit(cache=True)
-def _union_csr(xs_nc, type_n, cut2_tt, first_n, j_p, img_p, image_sc, shift_s3,
-               parent_n, size_n, off_n3, perc_n3):
+def _union_csr(xs_nc, type_n, cut2_tt, first_n, j_p, img_p, image_sc, shift_s,
+               parent_n, size_n, off_n, perc_n):
     """Union over a CSR cell list: bond when ``|d| < sqrt(cut2_tt[t_i, t_j])``; returns the bonds.
 
     xs_nc : (N, 3) wrapped positions in the list's row order; type_n : (N,) material ids of
     the rows; first_n, j_p, img_p, image_sc : the list (:class:`NeighborList`);
-    shift_s3 : (S, 3) integer lattice image of each image code.
+    shift_s : (S,) packed integer lattice image of each image code.
     """
     n = xs_nc.shape[0]
     nb = 0
@@ -146,13 +156,12 @@ def _union_csr(xs_nc, type_n, cut2_tt, first_n, j_p, img_p, image_sc, shift_s3,
             dz = xs_nc[j, 2] - x2 + image_sc[c, 2]
             if dx * dx + dy * dy + dz * dz < cut2_tt[ti, type_n[j]]:
                 nb += 1
-                _union(parent_n, size_n, off_n3, perc_n3, i, j, shift_s3[c, 0], shift_s3[c, 1],
-                       shift_s3[c, 2])
+                _union(parent_n, size_n, off_n, perc_n, i, j, shift_s[c])
     return nb
 
 
 @njit(cache=True)
-def _union_pairs(w_nc, box_c, periodic_c, i_p, j_p, parent_n, size_n, off_n3, perc_n3):
+def _union_pairs(w_nc, box_c, periodic_c, i_p, j_p, parent_n, size_n, off_n, perc_n):
     """Union over explicit pairs, each at its minimum image (w_nc: wrapped positions)."""
     for p in range(i_p.shape[0]):
         i = i_p[p]
@@ -166,35 +175,44 @@ def _union_pairs(w_nc, box_c, periodic_c, i_p, j_p, parent_n, size_n, off_n3, pe
             s1 = -int(round((w_nc[j, 1] - w_nc[i, 1]) / box_c[1]))
         if periodic_c[2]:
             s2 = -int(round((w_nc[j, 2] - w_nc[i, 2]) / box_c[2]))
-        _union(parent_n, size_n, off_n3, perc_n3, i, j, s0, s1, s2)
+        _union(parent_n, size_n, off_n, perc_n, i, j, _pack(s0, s1, s2))
     return i_p.shape[0]
 
 
 @njit(cache=True)
-def _label(parent_n, off_n3, perc_n3, row_n, label_n, k_n3):
+def _label(parent_n, off_n, perc_n, row_n, label_n, k_n3):
     """Fragment index of each particle (caller order; ``row_n[i]``: its union-find row).
 
     Fragments are numbered in order of their first particle (as
-    scipy.sparse.csgraph.connected_components does).  Returns the per-fragment
-    percolation flags (F, 3).
+    scipy.sparse.csgraph.connected_components does); ``k_n3`` receives each
+    particle's lattice image relative to its fragment's root.  Returns the
+    per-fragment percolation flags (F, 3).
     """
+    nr = parent_n.shape[0]
+    # compress every path in row order first (sequential), so the caller-order pass is one hop
+    for r in range(nr):
+        q, k = _find(parent_n, off_n, r)
+        parent_n[r] = q
+        off_n[r] = k
     n = row_n.shape[0]
-    lab_r = np.full(parent_n.shape[0], -1, np.int64)
+    lab_r = np.full(nr, -1, np.int64)
     perc_f3 = np.zeros((n, 3), np.bool_)
     nf = 0
     for i in range(n):
-        r, a0, a1, a2 = _find(parent_n, off_n3, row_n[i])
-        f = lab_r[r]
+        r = row_n[i]
+        q = parent_n[r]
+        f = lab_r[q]
         if f < 0:
             f = nf
-            lab_r[r] = f
+            lab_r[q] = f
             for d in range(3):
-                perc_f3[f, d] = perc_n3[r, d]
+                perc_f3[f, d] = (perc_n[q] >> d) & 1
             nf += 1
         label_n[i] = f
-        k_n3[i, 0] = a0
-        k_n3[i, 1] = a1
-        k_n3[i, 2] = a2
+        k0, k1, k2 = _unpack(off_n[r])
+        k_n3[i, 0] = k0
+        k_n3[i, 1] = k1
+        k_n3[i, 2] = k2
     return perc_f3[:nf]
 
 
@@ -254,6 +272,10 @@ class Fragments:
         Bond distance as a multiple of r0 (distance bonds).
     step, time : int or None, float or None
         ``atoms.info['step']`` and ``['time']`` (ASE units) when the Atoms had them.
+    meta : dict
+        ``timings_s`` (wall time of the pair search, the union-find and the
+        per-fragment sums, s) and, for distance bonds, ``npairs_searched``
+        (pairs the cell list returned).
     """
 
     labels: np.ndarray
@@ -462,6 +484,20 @@ def _check_pairs(pairs, n):
     return i_p, j_p
 
 
+def _check_images(ns, step_c, box_c, periodic_c):
+    """Refuse a graph whose lattice images could overflow the packed fields.
+
+    A particle's image relative to its fragment's root is that of a path of at
+    most ``ns`` bonds, each moving at most ``step_c`` along an axis, so it is
+    below ``ns * step_c / L + 1`` box lengths.
+    """
+    for d in range(3):
+        if periodic_c[d] and ns * min(step_c[d], 0.5 * box_c[d]) / box_c[d] + 2 >= IMG_LIMIT:
+            raise InputError("atoms", f"{ns} particles in a periodic box {box_c.round(6).tolist()}",
+                             f"fewer than {IMG_LIMIT} bond lengths across each periodic axis "
+                             "(fragment images are held in 21-bit fields)")
+
+
 def _wrapped(pos, box_c, periodic_c):
     w = np.array(pos, dtype=np.float64, order="C")
     for d in range(3):
@@ -540,10 +576,22 @@ class FragmentFinder:
                 new[sel] = np.arange(ns)
                 ok = keep[i_p] & keep[j_p]
                 i_p, j_p = new[i_p[ok]], new[j_p[ok]]
+        t0 = time.perf_counter()
+        t_list = 0.0
+        w = None
+        if pairs is None:
+            step_c = np.full(3, float(bf * r0m.max()))
+        else:
+            w = _wrapped(pos, box_c, periodic_c)
+            step_c = 0.5 * box_c
+            if ns // 2 + 2 >= IMG_LIMIT and len(i_p):
+                d = np.abs(w[j_p] - w[i_p])
+                step_c = np.minimum(d, box_c - d).max(axis=0)
+        _check_images(ns, step_c, box_c, periodic_c)
         parent = np.arange(ns, dtype=np.int64)
         size = np.ones(ns, np.int64)
-        off = np.zeros((ns, 3), np.int64)
-        perc = np.zeros((ns, 3), np.bool_)
+        off = np.zeros(ns, np.int64)
+        perc = np.zeros(ns, np.int8)
         if pairs is None and ns:
             cut = bf * 0.5 * (r0m[:, None] + r0m[None, :])
             cut2 = np.ascontiguousarray(cut * cut)
@@ -553,12 +601,14 @@ class FragmentFinder:
             use_threads(ns)
             nl.build(pos, atoms.cell.array, atoms.pbc)
             xs = nl.sorted_positions(pos)
+            t_list = time.perf_counter() - t0
             perm = nl.perm_n
             box = np.where(periodic_c, box_c, 0.0)
-            shift = np.zeros(nl.image_sc.shape, np.int64)
+            shift3 = np.zeros(nl.image_sc.shape, np.int64)
             for d in range(3):
                 if periodic_c[d]:
-                    shift[:, d] = np.rint(nl.image_sc[:, d] / box[d]).astype(np.int64)
+                    shift3[:, d] = np.rint(nl.image_sc[:, d] / box[d]).astype(np.int64)
+            shift = (shift3[:, 0] << 42) + (shift3[:, 1] << 21) + shift3[:, 2]
             nbonds = _union_csr(xs, np.ascontiguousarray(mid[perm]), cut2, nl.first_n, nl.j_p, nl.img_p,
                                 nl.image_sc, shift, parent, size, off, perc)
             row = np.empty(ns, np.int64)
@@ -567,13 +617,13 @@ class FragmentFinder:
             w[perm] = xs
             meta["npairs_searched"] = nl.npairs
         else:
-            w = _wrapped(pos, box_c, periodic_c)
             nbonds = _union_pairs(w, box_c, periodic_c, i_p, j_p, parent, size, off, perc) if ns else 0
             row = np.arange(ns, dtype=np.int64)
         lab = np.empty(ns, np.int64)
         k = np.empty((ns, 3), np.int64)
         perc_f = _label(parent, off, perc, row, lab, k)
         nf = len(perc_f)
+        t1 = time.perf_counter()
         g, m, p, mu, mw, v = _sums(lab, nf, np.ascontiguousarray(masses, dtype=np.float64),
                                    np.ascontiguousarray(mom, dtype=np.float64), w, k, box_c,
                                    np.ascontiguousarray(vol, dtype=np.float64))
@@ -589,12 +639,14 @@ class FragmentFinder:
             labels[sel] = lab
         else:
             labels = lab
+        meta["timings_s"] = {"pair_search": t_list, "union_find": t1 - t0 - t_list,
+                             "properties": time.perf_counter() - t1}
         step = atoms.info.get("step")
-        time = atoms.info.get("time")
+        t_info = atoms.info.get("time")
         return Fragments(labels=labels, g=g, mass=m, com=com, velocity=vel, volume=v, diameter=diam,
                          percolating=perc_f, nbonds=int(nbonds), bond=bond, b=bf,
                          step=None if step is None else int(step),
-                         time=None if time is None else float(time), meta=meta)
+                         time=None if t_info is None else float(t_info), meta=meta)
 
     def _volumes(self, atoms, pairs, mid, nmat):
         """Particle volumes, Angstrom^3: given; MCA cell volumes; r0^3/sqrt 2; (2 radius)^3/sqrt 2."""

@@ -153,6 +153,24 @@ def test_exclude_leaves_particles_out():
     assert fp.labels.tolist() == f.labels.tolist()
 
 
+def test_packed_images_round_trip_and_add():
+    import sys
+    from numba import njit
+    F = sys.modules["clusterdyn.analysis.fragments"]
+
+    @njit
+    def add(a, b):
+        return F._unpack(F._pack(a[0], a[1], a[2]) + F._pack(b[0], b[1], b[2]))
+
+    rng = np.random.default_rng(0)
+    h = F.IMG_LIMIT // 2
+    for _ in range(200):
+        a, b = rng.integers(-h, h, 3), rng.integers(-h, h, 3)
+        assert add(a, b) == tuple(a + b)
+    assert add(np.array([F.IMG_LIMIT - 1, -F.IMG_LIMIT, 0]), np.zeros(3, np.int64)) == \
+        (F.IMG_LIMIT - 1, -F.IMG_LIMIT, 0)
+
+
 # ------------------------------------------------------------------ random configurations against scipy
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
