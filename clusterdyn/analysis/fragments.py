@@ -267,11 +267,14 @@ class Fragments:
     nbonds : int
         Bonds in the graph (pairs within the bond distance, or linked pairs given).
     bond : str
-        How bonds were found: ``"distance b*r0 (b=...)"`` or ``"pairs"``.
+        How bonds were found: ``"distance b*r0_ab (b=...)"``, ``"linked pairs (MCA state)"``
+        or ``"pairs"``.
     b : float or None
         Bond distance as a multiple of r0 (distance bonds).
-    step, time : int or None, float or None
-        ``atoms.info['step']`` and ``['time']`` (ASE units) when the Atoms had them.
+    step : int or None
+        ``atoms.info['step']`` when the Atoms had it.
+    time : float or None
+        ``atoms.info['time']`` (ASE units) when the Atoms had it.
     meta : dict
         ``timings_s`` (wall time of the pair search, the union-find and the
         per-fragment sums, s) and, for distance bonds, ``npairs_searched``
@@ -458,7 +461,8 @@ def _bond_factor(atoms, b):
         b = _calc_parameter(atoms, "rc")
     if b is None:
         raise InputError("b", None, "a bond distance as a multiple of r0 (default: the cutoff rc of "
-                                    "the Atoms' ClusterDynamics calculator, which these Atoms lack)")
+                                    "the Atoms' ClusterDynamics calculator, which these Atoms lack)",
+                         hint="for MCA give pairs= (the MCA state or linked pair rows)")
     try:
         bf = float(b)
     except (TypeError, ValueError):
@@ -901,6 +905,9 @@ class FragmentObserver:
         # fail now, not at the first call, when no bond rule can be found
         if pairs is None:
             _bond_factor(atoms, b)
+            if _r0_per_material(atoms, r0, int(_material_ids(atoms).max(initial=0)) + 1) is None:
+                raise InputError("r0", None, "cluster sizes: r0= or Atoms from a clusterdyn builder "
+                                             "(atoms.info['cd_r0'])")
 
     def _state_key(self, atoms):
         """What the fragments depend on that changes during a run: positions and MCA links."""
