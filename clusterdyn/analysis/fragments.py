@@ -531,29 +531,18 @@ class FragmentFinder:
         return self.find(atoms)
 
     def find(self, atoms, pairs=None):
-        """The :class:`Fragments` of ``atoms``."""
+        """The :class:`Fragments` of ``atoms`` (``pairs`` overrides the finder's)."""
         pairs = self.pairs if pairs is None else pairs
         if callable(pairs) and not _is_mca_state(pairs):
             pairs = pairs(atoms)
         n = len(atoms)
         box_c, periodic_c = check_cell(atoms.cell.array, atoms.pbc)
         mid = _material_ids(atoms)
-        nmat = int(mid.max()) + 1 if n else 1
         if n and mid.min() < 0:
             raise InputError("atoms.arrays['material']", int(mid.min()), "material ids >= 0")
-        keep = None
-        if self.exclude is not None:
-            ex = self.exclude(atoms) if callable(self.exclude) else self.exclude
-            ex = np.asarray(ex)
-            if ex.dtype != bool or ex.shape != (n,):
-                raise InputError("exclude", f"{ex.dtype} array of shape {ex.shape}",
-                                 f"a bool mask of shape ({n},) or a callable returning one")
-            keep = ~ex
+        nmat = int(mid.max()) + 1 if n else 1
+        keep = self._keep(atoms)
         vol = self._volumes(atoms, pairs, mid, nmat)
-        pos = atoms.get_positions()
-        masses = atoms.get_masses()
-        mom = atoms.get_momenta()
-        meta = {}
         if pairs is None:
             bf = _bond_factor(atoms, self.b)
             r0m = _r0_per_material(atoms, self.r0, nmat)
@@ -562,8 +551,7 @@ class FragmentFinder:
                                              "(atoms.info['cd_r0'])")
             bond = f"distance b*r0_ab (b={bf:g})"
         else:
-            bf = None
-            bond = "pairs"
+            bf = r0m = None
             if _is_mca_state(pairs):
                 i_p, j_p = pairs.pair_rows(atoms)[:2]
                 lk = np.asarray(pairs.linked_p) == 1
@@ -571,64 +559,29 @@ class FragmentFinder:
                 bond = "linked pairs (MCA state)"
             else:
                 i_p, j_p = _check_pairs(pairs, n)
-        sel = np.arange(n) if keep is None else np.nonzero(keep)[0]
-        ns = len(sel)
+                bond = "pairs"
+        pos, masses, mom = atoms.get_positions(), atoms.get_masses(), atoms.get_momenta()
+        sel = None
         if keep is not None:
+            sel = np.nonzero(keep)[0]
             pos, masses, mom, vol, mid = pos[sel], masses[sel], mom[sel], vol[sel], mid[sel]
             if pairs is not None:
                 new = np.full(n, -1, np.int64)
-                new[sel] = np.arange(ns)
+                new[sel] = np.arange(len(sel))
                 ok = keep[i_p] & keep[j_p]
                 i_p, j_p = new[i_p[ok]], new[j_p[ok]]
         t0 = time.perf_counter()
-        t_list = 0.0
-        w = None
         if pairs is None:
-            step_c = np.full(3, float(bf * r0m.max()))
+            graph = self._distance_graph(atoms, pos, mid, bf, r0m, box_c, periodic_c)
         else:
-            w = _wrapped(pos, box_c, periodic_c)
-            step_c = 0.5 * box_c
-            if ns // 2 + 2 >= IMG_LIMIT and len(i_p):
-                d = np.abs(w[j_p] - w[i_p])
-                step_c = np.minimum(d, box_c - d).max(axis=0)
-        _check_images(ns, step_c, box_c, periodic_c)
-        parent = np.arange(ns, dtype=np.int64)
-        size = np.ones(ns, np.int64)
-        off = np.zeros(ns, np.int64)
-        perc = np.zeros(ns, np.int8)
-        if pairs is None and ns:
-            cut = bf * 0.5 * (r0m[:, None] + r0m[None, :])
-            cut2 = np.ascontiguousarray(cut * cut)
-            if self._nl is None or self._nl.cutoff != float(cut.max()):
-                self._nl = NeighborList(float(cut.max()), 0.0, half=True, sort=True)
-            nl = self._nl
-            use_threads(ns)
-            nl.build(pos, atoms.cell.array, atoms.pbc)
-            xs = nl.sorted_positions(pos)
-            t_list = time.perf_counter() - t0
-            perm = nl.perm_n
-            box = np.where(periodic_c, box_c, 0.0)
-            shift3 = np.zeros(nl.image_sc.shape, np.int64)
-            for d in range(3):
-                if periodic_c[d]:
-                    shift3[:, d] = np.rint(nl.image_sc[:, d] / box[d]).astype(np.int64)
-            shift = (shift3[:, 0] << 42) + (shift3[:, 1] << 21) + shift3[:, 2]
-            nbonds = _union_csr(xs, np.ascontiguousarray(mid[perm]), cut2, nl.first_n, nl.j_p, nl.img_p,
-                                nl.image_sc, shift, parent, size, off, perc)
-            row = np.empty(ns, np.int64)
-            row[perm] = np.arange(ns)
-            w = np.empty_like(xs)
-            w[perm] = xs
-            meta["npairs_searched"] = nl.npairs
-        else:
-            nbonds = _union_pairs(w, box_c, periodic_c, i_p, j_p, parent, size, off, perc) if ns else 0
-            row = np.arange(ns, dtype=np.int64)
+            graph = self._pair_graph(pos, i_p, j_p, box_c, periodic_c)
+        parent, off, perc, row, w, nbonds, meta = graph
+        ns = len(pos)
         lab = np.empty(ns, np.int64)
         k = np.empty((ns, 3), np.int64)
         perc_f = _label(parent, off, perc, row, lab, k)
-        nf = len(perc_f)
         t1 = time.perf_counter()
-        g, m, p, mu, mw, v = _sums(lab, nf, np.ascontiguousarray(masses, dtype=np.float64),
+        g, m, p, mu, mw, v = _sums(lab, len(perc_f), np.ascontiguousarray(masses, dtype=np.float64),
                                    np.ascontiguousarray(mom, dtype=np.float64), w, k, box_c,
                                    np.ascontiguousarray(vol, dtype=np.float64))
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -637,20 +590,80 @@ class FragmentFinder:
         for d in range(3):
             if periodic_c[d]:
                 com[:, d] -= np.floor(com[:, d] / box_c[d]) * box_c[d]
-        diam = np.cbrt(6.0 * v / math.pi)
-        if keep is not None:
+        labels = lab
+        if sel is not None:
             labels = np.full(n, -1, np.int64)
             labels[sel] = lab
-        else:
-            labels = lab
-        meta["timings_s"] = {"pair_search": t_list, "union_find": t1 - t0 - t_list,
+        t_search = meta.pop("t_search", 0.0)
+        meta["timings_s"] = {"pair_search": t_search, "union_find": t1 - t0 - t_search,
                              "properties": time.perf_counter() - t1}
         step = atoms.info.get("step")
         t_info = atoms.info.get("time")
-        return Fragments(labels=labels, g=g, mass=m, com=com, velocity=vel, volume=v, diameter=diam,
-                         percolating=perc_f, nbonds=int(nbonds), bond=bond, b=bf,
-                         step=None if step is None else int(step),
+        return Fragments(labels=labels, g=g, mass=m, com=com, velocity=vel, volume=v,
+                         diameter=np.cbrt(6.0 * v / math.pi), percolating=perc_f, nbonds=int(nbonds),
+                         bond=bond, b=bf, step=None if step is None else int(step),
                          time=None if t_info is None else float(t_info), meta=meta)
+
+    @staticmethod
+    def _forest(ns):
+        """Union-find arrays: parent, size, packed image to the parent, percolation bits."""
+        return (np.arange(ns, dtype=np.int64), np.ones(ns, np.int64), np.zeros(ns, np.int64),
+                np.zeros(ns, np.int8))
+
+    def _distance_graph(self, atoms, pos, mid, bf, r0m, box_c, periodic_c):
+        """CD bonds: pairs of the cell list closer than ``b r0_ab``."""
+        t0 = time.perf_counter()
+        ns = len(pos)
+        cut = bf * 0.5 * (r0m[:, None] + r0m[None, :])
+        _check_images(ns, np.full(3, cut.max()), box_c, periodic_c)
+        parent, size, off, perc = self._forest(ns)
+        if ns == 0:
+            return parent, off, perc, parent, np.zeros((0, 3)), 0, {}
+        if self._nl is None or self._nl.cutoff != float(cut.max()):
+            self._nl = NeighborList(float(cut.max()), 0.0, half=True, sort=True)
+        nl = self._nl
+        use_threads(ns)
+        nl.build(pos, atoms.cell.array, atoms.pbc)
+        xs = nl.sorted_positions(pos)
+        t_search = time.perf_counter() - t0
+        shift3 = np.zeros(nl.image_sc.shape, np.int64)
+        for d in range(3):
+            if periodic_c[d]:
+                shift3[:, d] = np.rint(nl.image_sc[:, d] / box_c[d]).astype(np.int64)
+        shift = (shift3[:, 0] << 42) + (shift3[:, 1] << 21) + shift3[:, 2]
+        perm = nl.perm_n
+        nbonds = _union_csr(xs, np.ascontiguousarray(mid[perm]), np.ascontiguousarray(cut * cut),
+                            nl.first_n, nl.j_p, nl.img_p, nl.image_sc, shift, parent, size, off, perc)
+        row = np.empty(ns, np.int64)
+        row[perm] = np.arange(ns)
+        w = np.empty_like(xs)
+        w[perm] = xs
+        return parent, off, perc, row, w, nbonds, {"npairs_searched": nl.npairs, "t_search": t_search}
+
+    def _pair_graph(self, pos, i_p, j_p, box_c, periodic_c):
+        """Bonds given as pairs of rows, each at its minimum image."""
+        ns = len(pos)
+        w = _wrapped(pos, box_c, periodic_c)
+        step_c = 0.5 * box_c
+        if ns // 2 + 2 >= IMG_LIMIT and len(i_p):
+            d = np.abs(w[j_p] - w[i_p])
+            step_c = np.minimum(d, box_c - d).max(axis=0)
+        _check_images(ns, step_c, box_c, periodic_c)
+        parent, size, off, perc = self._forest(ns)
+        nbonds = _union_pairs(w, box_c, periodic_c, i_p, j_p, parent, size, off, perc)
+        return parent, off, perc, np.arange(ns, dtype=np.int64), w, nbonds, {}
+
+    def _keep(self, atoms):
+        """Bool mask of the particles analysed (None: all)."""
+        if self.exclude is None:
+            return None
+        n = len(atoms)
+        ex = self.exclude(atoms) if callable(self.exclude) else self.exclude
+        ex = np.asarray(ex)
+        if ex.dtype != bool or ex.shape != (n,):
+            raise InputError("exclude", f"{ex.dtype} array of shape {ex.shape}",
+                             f"a bool mask of shape ({n},) or a callable returning one")
+        return ~ex
 
     def _volumes(self, atoms, pairs, mid, nmat):
         """Particle volumes, Angstrom^3: given; MCA cell volumes; r0^3/sqrt 2; (2 radius)^3/sqrt 2."""

@@ -151,6 +151,9 @@ def test_exclude_leaves_particles_out():
     assert f.labels.tolist() == [0, 0, -1, 1, 1] and f.g.tolist() == [2, 2]
     fp = fragments(a, pairs=(np.arange(4), np.arange(1, 5)), volumes=np.ones(5), exclude=ex)
     assert fp.labels.tolist() == f.labels.tolist()
+    none = fragments(a, b=1.15, r0=R0, exclude=np.ones(5, bool))
+    assert none.labels.tolist() == [-1] * 5 and none.n_fragments == 0
+    assert fragments(_atoms(np.zeros((0, 3))), b=1.15, r0=R0).n_fragments == 0
 
 
 def test_packed_images_round_trip_and_add():
