@@ -808,6 +808,12 @@ class FragmentAnalysis:
         params = getattr(trajectory, "parameters", None) or {}
         self._file_b = params.get("rc") if isinstance(params, dict) else None
         self._file_r0 = params.get("r0") if isinstance(params, dict) else None
+        meta = getattr(trajectory, "metadata", None)
+        calc = (meta or {}).get("calculator") if isinstance(meta, dict) else None
+        if isinstance(calc, dict) and calc.get("rc") is not None:
+            self._file_b = float(calc["rc"])          # the run's cutoff from the file's metadata
+        if pairs is None and getattr(trajectory, "has", {}).get("pairs"):
+            pairs = _file_pairs(trajectory)       # MCA: the linked pairs stored on every frame
         self.finder = FragmentFinder(b, r0=r0, pairs=pairs, volumes=volumes, exclude=exclude)
         self.g_max = int(g_max)
         self.keep = bool(keep)
@@ -870,6 +876,21 @@ class FragmentAnalysis:
         r["g_max"] = self.g_max
         if self.keep:
             r["fragments"] = self._frags
+
+
+def _file_pairs(reader):
+    """``pairs(atoms) -> (i_p, j_p)``: rows of the pairs linked on the frame ``atoms`` came from."""
+    def pairs(atoms):
+        ids = np.asarray(atoms.arrays["id"], dtype=np.int64)
+        row = np.full(int(ids.max()) + 1, -1, np.int64)
+        row[ids] = np.arange(len(ids))
+        frame = atoms.info.get("frame")
+        if frame is None:
+            steps = np.asarray(reader.steps)
+            frame = int(np.nonzero(steps == atoms.info["step"])[0][0])
+        lp = reader.linked_pairs(frame)
+        return row[lp[:, 0]], row[lp[:, 1]]
+    return pairs
 
 
 class FragmentObserver:

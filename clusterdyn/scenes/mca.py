@@ -21,7 +21,8 @@ import numpy as np
 from .. import units
 from ..materials import get_material
 from .base import Param, Quantity, SceneResult, register
-from .mca_experiments import broken_links, fragments, uniaxial
+from ..analysis.fragments import fragments
+from .mca_experiments import broken_links, uniaxial
 
 MATERIALS = ("alumina", "concrete")
 
@@ -64,7 +65,7 @@ def run_uniaxial(mode, vals, out=None, progress=True):
     st = res["dyn"].state
     strain, stress = res["strain"], res["stress"]
     GPa = units.GPa
-    frag = fragments(st)
+    frag = np.sort(fragments(res["atoms"], pairs=st).g)[::-1]
     nbig = int(np.sum(frag >= 0.05 * len(res["atoms"])))
     if out is not None:
         files += _write_outputs(out, mode, res, mat)

@@ -25,20 +25,6 @@ def broken_links(state, npairs0):
     return np.bincount(rows[ids], minlength=len(state.id_n))
 
 
-def fragments(state, npairs0=None):
-    """Sizes of the connected components of linked pairs (largest first)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    n = len(state.id_n)
-    rows = state.rows(state.id_n)
-    lk = state.linked_p == 1
-    a = rows[state.pid_p2[lk, 0]]
-    b = rows[state.pid_p2[lk, 1]]
-    g = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
-    return np.sort(np.bincount(lab))[::-1]
-
-
 def uniaxial(material, mode="tension", d=1.0, size=(16, 5, 5), packing="fcc", strain_max=None,
              steps=3000, ramp=0.1, damping=0.05, scatter=0.0, seed=0, dim=3, path=None,
              interval=20, progress=False, observers=(), stop_after_peak=None, pbc_lateral=False,

@@ -282,12 +282,13 @@ def test_file_without_metadata_one_line_error(tmp_path):
 
 
 def test_mca_pair_state_every_frame(tmp_path):
-    from clusterdyn.scenes.mca_experiments import fragments, uniaxial
+    from clusterdyn.analysis.fragments import fragments
+    from clusterdyn.scenes.mca_experiments import uniaxial
     captured, live = {}, []
 
     def record():
         st = captured["atoms"].calc.state
-        live.append((st.step, st.linked_pairs(), fragments(st)))
+        live.append((st.step, st.linked_pairs(), np.sort(fragments(captured["atoms"], pairs=st).g)[::-1]))
 
     path = tmp_path / "mca.h5md"
     res = uniaxial(get_material("alumina"), "tension", size=(10, 3, 3), steps=1000, scatter=0.02,
@@ -313,6 +314,11 @@ def test_mca_pair_state_every_frame(tmp_path):
             lab = connected_components(g, directed=False)[1]
             np.testing.assert_array_equal(np.sort(np.bincount(lab))[::-1], frag)
         assert counts[0] > counts[-1]                    # links broke during the run
+        # the project's fragment analysis on the file alone (pairs from /connectivity) agrees
+        from clusterdyn.analysis import FragmentAnalysis
+        fa = FragmentAnalysis(r).run()
+        for frag, f in zip([x for _, _, x in live], fa.results.fragments):
+            np.testing.assert_array_equal(np.sort(f.g)[::-1], frag)
         a = r.get_atoms(0)
         assert a.info["mca_materials"] == ["alumina"] and a.info["mca_dim"] == 3
         assert r.metadata["calculator"]["class"] == "MCA"

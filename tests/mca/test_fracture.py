@@ -3,15 +3,23 @@
 import numpy as np
 
 from clusterdyn.materials import get_material
-from clusterdyn.scenes.mca_experiments import fragments, uniaxial
+from clusterdyn.analysis.fragments import fragments
+from clusterdyn.scenes.mca_experiments import uniaxial
 
 
 def test_tension_peak_and_two_parts():
     mat = get_material("alumina")
     r = uniaxial(mat, "tension", size=(16, 5, 5), steps=3000, scatter=0.02, damping=0.05)  # scene defaults
     assert abs(r["peak_stress"] / mat.sigma_t - 1) < 0.10
-    parts = fragments(r["dyn"].state)
-    assert np.sum(parts >= 0.05 * len(r["atoms"])) == 2
+    st, a = r["dyn"].state, r["atoms"]
+    parts = fragments(a, pairs=st)                            # the linked-pair graph
+    assert np.sum(parts.g >= 0.05 * len(a)) == 2
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    i_p, j_p = st.pair_rows(a)[:2]
+    lk = st.linked_p == 1
+    g = coo_matrix((np.ones(int(lk.sum())), (i_p[lk], j_p[lk])), shape=(len(a), len(a)))
+    assert parts.labels.tolist() == connected_components(g, directed=False)[1].tolist()
     assert r["stress"][-1] < 0.1 * r["peak_stress"]          # it does not carry load any more
 
 
