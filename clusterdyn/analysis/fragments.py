@@ -55,6 +55,7 @@ from numba import njit
 
 from .. import units
 from ..errors import InputError
+from .base import Results
 from ..neighbors import NeighborList, check_cell
 from ..parallel import use_threads
 
@@ -738,19 +739,6 @@ def fragments(atoms, b=None, *, r0=None, pairs=None, volumes=None, exclude=None)
 
 
 # ----------------------------------------------------------------------------- over a trajectory
-
-
-class Results(dict):
-    """A dict whose keys are also attributes (as MDAnalysis' ``Results``)."""
-
-    def __getattr__(self, name):
-        try:
-            return self[name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-    def __setattr__(self, name, value):
-        self[name] = value
 
 
 def _frame_summary(f, g_max):

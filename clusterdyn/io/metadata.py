@@ -40,14 +40,13 @@ is recorded for reference); any other curve as ``{"kind": class name,
 parameters.
 """
 
-import json
 import warnings
 
 import numpy as np
 
 from clusterdyn import units
 from clusterdyn.errors import InputError
-from clusterdyn.io._common import dumps, to_jsonable
+from clusterdyn.io._common import dumps, read_json_dataset, to_jsonable
 
 __all__ = ["METADATA_VERSION", "UNITS", "run_metadata", "write_metadata", "read_metadata",
            "describe_material", "material_from_description", "materials_from_metadata",
@@ -333,13 +332,8 @@ def write_metadata(h5file, meta):
 
 
 # ----------------------------------------------------------------------------- read back
-def _json(group, name):
-    if group is None or name not in group:
-        return None
-    raw = group[name][()]
-    if isinstance(raw, bytes):
-        raw = raw.decode("utf-8")
-    return json.loads(raw)
+_json = read_json_dataset
+
 
 
 def read_metadata(h5file):
