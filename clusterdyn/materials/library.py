@@ -143,16 +143,17 @@ _FROM_HUGONIOT = {
                 "nearest documented alloy to the 2017-T4 of the Piekutowski sphere tests (both Al-Cu-Mg, "
                 "2.79 g/cm3): no sourced 2017 Hugoniot was found"),
     "steel": ("steel-4340", "Hugoniot of 4340 steel (RC 38), Steinberg UCRL-MA-106439 (1996); stands in for "
-              "the striker and plate steels of the multilayer target (the grades are not given)"),
+              "the striker and plate steels of the multilayer target"),
     "textolite": ("textolite-est", "ESTIMATE, no sourced Hugoniot of textolite (phenolic cotton-fabric "
-                  "laminate) was found: density 1.35 g/cm3 (middle of the 1.3-1.4 of GOST 5-78 textolite) "
-                  "with the line of a cured thermoset resin, epoxy Epon 828 (c0 = 2.678 km/s, s = 1.52; "
+                  "laminate) was found: density 1.35 g/cm3 (middle of the usual 1.3-1.4 g/cm3 of textolite, "
+                  "not a sourced value) with the line of a cured thermoset resin, epoxy Epon 828 (c0 = 2.678 km/s, s = 1.52; "
                   "Kinslow (ed.) High-Velocity Impact Phenomena (1970), appendix)"),
     "paraffin": ("paraffin-est", "ESTIMATE: the only sourced paraffin fit found (0.900 g/cm3, c0 = 2.960 km/s, "
                  "s = 2.531; Kinslow (ed.) High-Velocity Impact Phenomena (1970), appendix) has a slope far "
-                 "above every (CH2)n polymer's, as a fit to low-pressure data would; used instead: paraffin's "
-                 "density 0.900 g/cm3 with the polyethylene line of the same (CH2)n chain (c0 = 2.901 km/s, "
-                 "s = 1.481; Marsh (ed.) LASL Shock Hugoniot Data (1980))"),
+                 "above every (CH2)n polymer's (perhaps a low-pressure fit or a misprint; not checked against "
+                 "the book); used instead: paraffin's density 0.900 g/cm3 with the line of polyethylene, the "
+                 "same (CH2)n chain (c0 = 2.901 km/s, s = 1.481; low-density polyethylene, Kinslow (ed.) "
+                 "High-Velocity Impact Phenomena (1970), appendix)"),
 }
 
 
