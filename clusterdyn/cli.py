@@ -144,6 +144,13 @@ def cmd_materials(args):
         line = f"{name}: rho0 = {m.rho0 / units.g_cm3:g} g/cm3"
         if m.curve is not None:
             line += f", c0 = {m.c0 / units.km_s:.4g} km/s, cold curve {type(m.curve).__name__}"
+            if hasattr(m.curve, "n_tail"):
+                lo, hi = m.curve.tail_slopes
+                line += (f" ({m.curve.tail} tail beyond delta = {m.curve.delta_rows[-1]:.4g}: n = "
+                         f"{m.curve.n_tail:.4g}, A = {m.curve.A_tail / units.GPa:.4g} GPa; dP/d delta "
+                         f"{lo / units.GPa:.0f} -> {hi / units.GPa:.0f} GPa)")
+            elif hasattr(m.curve, "n"):
+                line += f" (n = {m.curve.n:.4g})"
         if m.E is not None:
             line += f", E = {m.E / units.GPa:g} GPa, nu = {m.nu:g}"
         if m.hugoniot:

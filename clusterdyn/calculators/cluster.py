@@ -120,7 +120,7 @@ class ClusterDynamics(Calculator):
         Cluster size of each id, Angstrom.
     skin : float, optional
         Verlet skin as a multiple of the smallest r0 (default: :func:`default_skin`).
-    n_table : int, default :data:`clusterdyn.potentials.N_BINS` (10000)
+    n_table : int, default :data:`clusterdyn.potentials.N_BINS` (10407)
         Bins of the cubic-Hermite pair tables, uniform in r^2 over [(R_MIN_FACTOR r0)^2, (rc r0)^2].
     attraction : "all" or "initial"
         ``"initial"``: attraction only between pairs bonded at set-up

@@ -97,6 +97,53 @@ class MurnaghanCurve(ColdCurve):
         return f"MurnaghanCurve(rho0={self.rho0:.6g}, c0={self._c0:.6g}, n={self.n:g})"
 
 
+#: a tabulated cold curve's tail is fitted to its rows with delta >= this (the steep side of the
+#: tension minimum, where the Murnaghan form applies; physics of docs/theory.md, "Cold curve")
+TAIL_FIT_DELTA_MIN = 0.751
+#: continuations beyond a tabulated curve's densest row
+TAILS = ("murnaghan", "tait")
+
+
+def fit_murnaghan(delta, pressure, delta_min=TAIL_FIT_DELTA_MIN):
+    """Unweighted least-squares fit of ``P = A (delta^n - 1)`` in P to the rows with delta >= delta_min.
+
+    For a given n the best A is linear (``A = sum P g / sum g^2``, ``g = delta^n - 1``),
+    so the fit is a one-dimensional minimisation of the residual over n in (1, 30).
+
+    Parameters
+    ----------
+    delta, pressure : array_like
+        Rows of a cold curve (compression, pressure in any unit).
+    delta_min : float, default 0.751
+        Lightest row used.
+
+    Returns
+    -------
+    (A, n) : A in the unit of ``pressure``.
+    """
+    from scipy.optimize import minimize_scalar
+    d = np.asarray(delta, dtype=float)
+    p = np.asarray(pressure, dtype=float)
+    m = d >= delta_min
+    if m.sum() < 3:
+        raise InputError("delta", d.tolist(), f"at least 3 rows with delta >= {delta_min} for the tail fit")
+    d, p = d[m], p[m]
+
+    def best_a(n):
+        g = d ** n - 1.0
+        return float(np.dot(p, g) / np.dot(g, g))
+
+    def resid(n):
+        return float(np.sum((best_a(n) * (d ** n - 1.0) - p) ** 2))
+
+    lo, hi = 1.0 + 1e-6, 30.0
+    res = minimize_scalar(resid, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12})
+    n = float(res.x)
+    if not (lo + 1e-3 < n < hi - 1e-3):
+        raise InputError("pressure", p.tolist(), "rows whose Murnaghan fit P = A (delta^n - 1) has 1 < n < 30")
+    return best_a(n), n
+
+
 class TabulatedCurve(ColdCurve):
     """Cold curve from rows (delta, eps_x, P_x), interpolated consistently.
 
@@ -106,12 +153,19 @@ class TabulatedCurve(ColdCurve):
     P_x is then ``rho0 delta^2 d eps/d delta``: both columns are honoured at the
     rows and the pair potential is exactly conservative.
 
-    Beyond the densest row the curve continues with a Tait tail
-    ``P = P1 + K1/n1 ((delta/delta1)^n1 - 1)`` matching value and slope
-    (``K1 = delta1 P'(delta1)``), with ``n1 = 1 + P''(delta1) delta1^2 / K1``
-    from the curvature of the last three rows, clipped to [2, 8]
-    (:attr:`n_tail`).  Below the lightest row (tension) P continues linearly
-    with its slope there.
+    Beyond the densest row (delta1, P1) the curve continues with the table's
+    own Murnaghan form: ``(A, n)`` from :func:`fit_murnaghan` (rows with
+    delta >= ``fit_min``), and
+
+    - ``tail="murnaghan"`` (default): ``P = P1 (delta^n - 1)/(delta1^n - 1)``,
+      the fitted form scaled to meet the last row's value; P is continuous at
+      delta1, its slope jumps (:attr:`tail_slopes`);
+    - ``tail="tait"``: ``P = P1 + K1/n ((delta/delta1)^n - 1)`` with
+      ``K1 = delta1 P'(delta1)``, matching value and slope at delta1 (same n).
+
+    The energy continues in closed form (integral of ``P/(rho0 delta^2)``), so
+    eps is continuous and the pair stays conservative.  Below the lightest row
+    (tension) P continues linearly with its slope there.
 
     Parameters
     ----------
@@ -120,10 +174,24 @@ class TabulatedCurve(ColdCurve):
         One row must be delta = 1 with eps = P = 0.
     rho0 : float
         Density at rest, amu/Angstrom^3.
+    tail : {"murnaghan", "tait"}, default "murnaghan"
+        Continuation beyond the densest row.
+    fit_min : float, default 0.751
+        Lightest row of the tail fit.
+
+    Attributes
+    ----------
+    n_tail, A_tail : float
+        Exponent and coefficient (eV/Angstrom^3) of the fitted Murnaghan form.
+    tail : str
+        The continuation in use.
     """
 
-    def __init__(self, delta, eps, pressure, rho0):
+    def __init__(self, delta, eps, pressure, rho0, tail="murnaghan", fit_min=TAIL_FIT_DELTA_MIN):
         self.rho0 = check_positive("rho0", rho0)
+        if tail not in TAILS:
+            raise InputError("tail", tail, "one of " + ", ".join(repr(t) for t in TAILS))
+        self.tail = tail
         d = np.asarray(delta, dtype=float)
         e = np.asarray(eps, dtype=float)
         p = np.asarray(pressure, dtype=float)
@@ -144,17 +212,23 @@ class TabulatedCurve(ColdCurve):
         self._eps = BPoly.from_derivatives(d, np.column_stack([e, slope, curv]))
         self._deps = self._eps.derivative()
         self._d2eps = self._deps.derivative()
-        # Tait tail beyond the densest row
+        # the tail beyond the densest row, from the table's own Murnaghan form
+        self.A_tail, self.n_tail = fit_murnaghan(d, p, fit_min)
+        self.fit_min = float(fit_min)
         d1, p1, k1 = d[-1], p[-1], d[-1] * dp[-1]
-        # curvature from the last three rows (second divided difference)
-        x0, xa, xb = d[-3], d[-2], d[-1]
-        y0, ya, yb = p[-3], p[-2], p[-1]
-        p2 = 2.0 * (y0 / ((x0 - xa) * (x0 - xb)) + ya / ((xa - x0) * (xa - xb))
-                    + yb / ((xb - x0) * (xb - xa)))
-        self.n_tail = float(np.clip(1.0 + p2 * d1 ** 2 / k1, 2.0, 8.0))
+        if not (p1 > 0 and k1 > 0):
+            raise InputError("pressure", p.tolist(), "a densest row in compression (P > 0, dP/d delta > 0)")
+        #: the scaled Murnaghan tail's coefficient B: P = B (delta^n - 1)
+        self._b_tail = p1 / (d1 ** self.n_tail - 1.0)
         self._tail = (d1, e[-1], p1, k1)
         # linear continuation in tension below the lightest row
         self._head = (d[0], e[0], p[0], dp[0])
+
+    @property
+    def tail_slopes(self):
+        """dP/d delta at the densest row from the table side and from the tail side (eV/Angstrom^3)."""
+        d1, _, _, k1 = self._tail
+        return k1 / d1, float(self.dpressure(d1 * (1.0 + 1e-12)))
 
     def _split(self, delta):
         d = np.atleast_1d(np.asarray(delta, dtype=float))
@@ -170,10 +244,15 @@ class TabulatedCurve(ColdCurve):
         out = np.empty_like(d)
         out[mid] = self._eps(d[mid])
         d1, e1, p1, k1 = self._tail
-        n1 = self.n_tail
+        n = self.n_tail
         x = d[hi]
-        out[hi] = (e1 + (p1 - k1 / n1) / self.rho0 * (1.0 / d1 - 1.0 / x)
-                   + k1 / (n1 * self.rho0 * d1 ** n1) * (x ** (n1 - 1.0) - d1 ** (n1 - 1.0)) / (n1 - 1.0))
+        if self.tail == "murnaghan":
+            # integral of B (delta^n - 1) / (rho0 delta^2) from d1 to x
+            out[hi] = e1 + self._b_tail / self.rho0 * ((x ** (n - 1.0) - d1 ** (n - 1.0)) / (n - 1.0)
+                                                       + 1.0 / x - 1.0 / d1)
+        else:
+            out[hi] = (e1 + (p1 - k1 / n) / self.rho0 * (1.0 / d1 - 1.0 / x)
+                       + k1 / (n * self.rho0 * d1 ** n) * (x ** (n - 1.0) - d1 ** (n - 1.0)) / (n - 1.0))
         d0, e0, p0, s0 = self._head
         x = d[lo]
         a = p0 - s0 * d0
@@ -185,7 +264,11 @@ class TabulatedCurve(ColdCurve):
         out = np.empty_like(d)
         out[mid] = self.rho0 * d[mid] ** 2 * self._deps(d[mid])
         d1, e1, p1, k1 = self._tail
-        out[hi] = p1 + k1 / self.n_tail * ((d[hi] / d1) ** self.n_tail - 1.0)
+        n = self.n_tail
+        if self.tail == "murnaghan":
+            out[hi] = self._b_tail * (d[hi] ** n - 1.0)
+        else:
+            out[hi] = p1 + k1 / n * ((d[hi] / d1) ** n - 1.0)
         d0, e0, p0, s0 = self._head
         out[lo] = p0 + s0 * (d[lo] - d0)
         return out if np.ndim(delta) else float(out[0])
@@ -196,10 +279,14 @@ class TabulatedCurve(ColdCurve):
         x = d[mid]
         out[mid] = self.rho0 * (2.0 * x * self._deps(x) + x ** 2 * self._d2eps(x))
         d1, e1, p1, k1 = self._tail
-        out[hi] = k1 / d1 * (d[hi] / d1) ** (self.n_tail - 1.0)
+        n = self.n_tail
+        if self.tail == "murnaghan":
+            out[hi] = self._b_tail * n * d[hi] ** (n - 1.0)
+        else:
+            out[hi] = k1 / d1 * (d[hi] / d1) ** (n - 1.0)
         out[lo] = self._head[3]
         return out if np.ndim(delta) else float(out[0])
 
     def __repr__(self):
         return (f"TabulatedCurve({len(self.delta_rows)} rows, delta {self.delta_rows[0]:.3g}.."
-                f"{self.delta_rows[-1]:.3g}, Tait tail n1={self.n_tail:.3g})")
+                f"{self.delta_rows[-1]:.3g}, {self.tail} tail n={self.n_tail:.4g})")

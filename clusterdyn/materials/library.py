@@ -9,7 +9,7 @@ from importlib import resources
 import numpy as np
 
 from .. import units
-from ..errors import InputError
+from ..errors import InputError, check_positive
 from .curves import ColdCurve, MurnaghanCurve, TabulatedCurve
 
 
@@ -63,6 +63,41 @@ class Material:
     def replace(self, **changes):
         return dataclasses.replace(self, **changes)
 
+    @classmethod
+    def from_hugoniot(cls, name, rho0, c0, s, source, hugoniot=None):
+        """A CD material from a measured Hugoniot ``D = c0 + s u`` (docs/theory.md, "Materials from shock data").
+
+        The cold curve is the Tait/Murnaghan form with ``K0 = rho0 c0^2`` and
+        ``n = 4 s - 1`` (the weak-shock slope of a Tait Hugoniot is (n + 1)/4).
+
+        Parameters
+        ----------
+        name : str
+            Material name.
+        rho0 : float
+            Density at rest, amu/Angstrom^3 (``2.703 * units.g_cm3``).
+        c0 : float
+            Hugoniot intercept (bulk sound speed), Angstrom/ASE time (``5.24 * units.km_s``).
+        s : float
+            Hugoniot slope, > 0.25 (so that n > 0).
+        source : str
+            Where the Hugoniot comes from (required, non-empty).
+        hugoniot : str, optional
+            Row of the experimental Hugoniot table (:func:`hugoniot`) to compare with.
+        """
+        rho0 = check_positive("rho0", rho0)
+        c0 = check_positive("c0", c0)
+        try:
+            s = float(s)
+        except (TypeError, ValueError):
+            raise InputError("s", s, "a Hugoniot slope > 0.25 (n = 4 s - 1 > 0)") from None
+        if not (math.isfinite(s) and s > 0.25):
+            raise InputError("s", s, "a Hugoniot slope > 0.25 (n = 4 s - 1 > 0)")
+        if not isinstance(source, str) or not source.strip():
+            raise InputError("source", source, "a non-empty text naming the Hugoniot's source")
+        return cls(name=name, rho0=rho0, curve=MurnaghanCurve(rho0, c0, 4.0 * s - 1.0), source=source,
+                   hugoniot=hugoniot)
+
 
 def _data_path(name):
     return resources.files("clusterdyn") / "data" / name
@@ -75,16 +110,19 @@ def load_al_table():
     return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
 
 
-def _aluminium():
+def _aluminium(tail="murnaghan"):
     t = load_al_table()
     rho0 = 2.71 * units.g_cm3
     delta = t["rho_g_cm3"] / 2.71          # the rho column is exact; delta is rounded to 3 digits
-    curve = TabulatedCurve(delta, t["eps_x_kJ_g"] * units.kJ_g, t["P_x_GPa"] * units.GPa, rho0)
+    curve = TabulatedCurve(delta, t["eps_x_kJ_g"] * units.kJ_g, t["P_x_GPa"] * units.GPa, rho0, tail=tail)
+    rule = ("the table's own Murnaghan form P = A (delta^n - 1), fitted to the rows with delta >= 0.751, "
+            "scaled to the densest row's value" if tail == "murnaghan" else
+            "a Tait form slope-matched at the densest row, with the exponent n of the table's own Murnaghan fit")
     return Material(
-        name="Al", rho0=rho0, curve=curve, hugoniot="Al-1100",
+        name="Al" if tail == "murnaghan" else "Al-" + tail, rho0=rho0, curve=curve, hugoniot="Al-1100",
         source=("Cold curve: Table 1 of Davydov et al., 'Modelling high-rate deformation by the "
                 "cluster dynamics method' (VNIIEF); from Glushak, Gudarenko, Styazhkin, Zherebtsov, "
-                "VANT ser. Mat. Mod. Fiz. Proc. 1991(1) 32-37"),
+                f"VANT ser. Mat. Mod. Fiz. Proc. 1991(1) 32-37. Beyond delta = 2.37: {rule}"),
     )
 
 
@@ -97,12 +135,46 @@ def _murnaghan(name, rho, c0, n, hug=None):
     )
 
 
+#: materials from shock data (Material.from_hugoniot): name -> (row of data/hugoniot.csv, source text).
+#: The row gives rho0, c0 and s; data/SOURCES.md says where each row comes from.
+_FROM_HUGONIOT = {
+    "Al-6061-T6": ("Al-6061-T6", "Hugoniot of aluminium 6061-T6, Steinberg UCRL-MA-106439 (1996)"),
+    "Al-2024": ("Al-2024", "Hugoniot of aluminium 2024, Marsh (ed.) LASL Shock Hugoniot Data (1980); the "
+                "nearest documented alloy to the 2017-T4 of the Piekutowski sphere tests (both Al-Cu-Mg, "
+                "2.79 g/cm3): no sourced 2017 Hugoniot was found"),
+    "steel": ("steel-4340", "Hugoniot of 4340 steel (RC 38), Steinberg UCRL-MA-106439 (1996); stands in for "
+              "the striker and plate steels of the multilayer target"),
+    "textolite": ("textolite-est", "ESTIMATE, no sourced Hugoniot of textolite (phenolic cotton-fabric "
+                  "laminate) was found: density 1.35 g/cm3 (middle of the usual 1.3-1.4 g/cm3 of textolite, "
+                  "not a sourced value) with the line of a cured thermoset resin, epoxy Epon 828 (c0 = 2.678 km/s, s = 1.52; "
+                  "Kinslow (ed.) High-Velocity Impact Phenomena (1970), appendix)"),
+    "paraffin": ("paraffin-est", "ESTIMATE: the only sourced paraffin fit found (0.900 g/cm3, c0 = 2.960 km/s, "
+                 "s = 2.531; Kinslow (ed.) High-Velocity Impact Phenomena (1970), appendix) has a slope far "
+                 "above every (CH2)n polymer's (perhaps a low-pressure fit or a misprint; not checked against "
+                 "the book); used instead: paraffin's density 0.900 g/cm3 with the line of polyethylene, the "
+                 "same (CH2)n chain (c0 = 2.901 km/s, s = 1.481; low-density polyethylene, Kinslow (ed.) "
+                 "High-Velocity Impact Phenomena (1970), appendix)"),
+}
+
+
+def _from_hugoniot_row(name):
+    key, source = _FROM_HUGONIOT[name]
+    h = hugoniots()[key]
+    if h.s2 != 0 or h.s3 != 0:
+        raise InputError("hugoniot", key, "a linear Hugoniot row (s2 = s3 = 0) for Material.from_hugoniot")
+    return Material.from_hugoniot(name, h.rho0_g_cm3 * units.g_cm3, h.c0_km_s * units.km_s, h.s1,
+                                  source, hugoniot=key)
+
+
 _BUILDERS = {
     "Al": _aluminium,
+    "Al-tait": lambda: _aluminium("tait"),
     "Pb": lambda: _murnaghan("Pb", 11.34, 1.972, 3.0, "Pb"),
     "B4C": lambda: _murnaghan("B4C", 2.51, 9.06, 3.13),
     "h-BN": lambda: _murnaghan("h-BN", 2.29, 3.19, 10.41),
 }
+for _name in _FROM_HUGONIOT:
+    _BUILDERS[_name] = (lambda n: (lambda: _from_hugoniot_row(n)))(_name)
 _CACHE = {}
 
 
@@ -116,9 +188,17 @@ def material_names():
     return list(_BUILDERS)
 
 
+def cd_material_names():
+    """Names of the library materials with a cold curve (usable by Cluster Dynamics)."""
+    return [n for n in _BUILDERS if get_material(n).curve is not None]
+
+
 def get_material(name):
     """Return the library material ``name`` (e.g. ``"Al"``, ``"Pb"``, ``"B4C"``, ``"h-BN"``).
 
+    ``"Al-tait"`` is aluminium with the slope-matched Tait tail beyond the cold
+    table's densest row instead of the default scaled Murnaghan tail
+    (:class:`~clusterdyn.materials.TabulatedCurve`), to see the tail's effect.
     A :class:`Material` passed in is returned unchanged.
     """
     if isinstance(name, Material):

@@ -24,11 +24,13 @@ from ..materials import get_material
 SQRT2 = math.sqrt(2.0)
 #: smallest tabulated distance, as a fraction of r0 (closer is an instability).  Hot shocked
 #: lattices push pairs well inside the densest cold-curve row (0.75 r0 for aluminium): at
-#: 6 km/s thermal collisions reach 0.4 r0, so the table runs down to compression delta = 37.
-R_MIN_FACTOR = 0.3
-#: bins of a pair table, uniform in r^2 over [(R_MIN_FACTOR r0)^2, (rc r0)^2] (at rc = 1.15 a bin
-#: spans 2.5e-4 r0 at r0, 8.2e-4 r0 at 0.3 r0)
-N_BINS = 10000
+#: 6 km/s thermal collisions reach 0.45 r0, at 20 km/s 0.30 r0 (aluminium, default sample), so
+#: the table runs down to compression delta = 125.
+R_MIN_FACTOR = 0.2
+#: bins of a pair table, uniform in r^2 over [(R_MIN_FACTOR r0)^2, (rc r0)^2]; 10407 keeps the bin
+#: width of the former 10000 bins from 0.3 r0 (at rc = 1.15: 2617 bins between r0 and rc, a bin
+#: spans 2.5e-4 r0 at r0, 1.2e-3 r0 at 0.2 r0), so the interpolation error at r0 is unchanged
+N_BINS = 10407
 #: default cutoff, as a multiple of r0
 DEFAULT_RC = 1.15
 
@@ -64,7 +66,7 @@ class ClusterPotential:
     cutoff : float
         ``rc * r0``, Angstrom.
     r_min : float
-        Smallest tabulated distance ``R_MIN_FACTOR r0`` (0.3 r0).
+        Smallest tabulated distance ``R_MIN_FACTOR r0`` (0.2 r0).
     """
 
     def __init__(self, material, r0, rc=DEFAULT_RC):

@@ -19,14 +19,15 @@ from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
-from ..materials import get_material, hugoniot
+from ..materials import cd_material_names, get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 
-CD_MATERIALS = ("Al", "Pb", "B4C", "h-BN")
+#: the library materials with a cold curve (materials registered later are not in the choice list)
+CD_MATERIALS = tuple(cd_material_names())
 
 PARAMS = [
     Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
