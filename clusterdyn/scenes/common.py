@@ -4,7 +4,8 @@ import time
 
 import numpy as np
 
-from ..md.boundaries import Piston
+from ..io.checkpoint import save_run
+from ..md.drives import Piston
 
 
 def thermal_noise(atoms, rms, seed, exclude=None):
@@ -21,13 +22,15 @@ def thermal_noise(atoms, rms, seed, exclude=None):
 
 
 def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkpoint=None,
-               checkpoint_every=0, get_extra=None):
+               checkpoint_every=0, get_extra=None, save=None):
     """Run up to step ``nsteps``, calling ``on_frame(dyn)`` every ``nsteps/nframes`` steps.
 
     The frame at step 0 is taken unless the dynamics is resumed (``dyn.nsteps > 0``:
     a restart continues after its last frame).  Every ``checkpoint_every``
-    frames (0 = never) the full state goes to ``checkpoint`` with
-    ``get_extra()`` (the caller's analysis state) beside it.  Shows one tqdm
+    frames (0 = never) the full state goes to ``checkpoint``: by
+    ``save(checkpoint)`` if given, else by
+    :func:`clusterdyn.io.checkpoint.save_run` with ``get_extra()`` (the
+    caller's analysis state) beside it.  Shows one tqdm
     bar over all steps with time left when ``progress``.  Returns the wall
     time of the stepping alone.
     """
@@ -53,7 +56,10 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
             on_frame(dyn)
             nframe += 1
             if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
-                dyn.checkpoint(checkpoint, extra=get_extra() if get_extra else None)
+                if save is not None:
+                    save(checkpoint)
+                else:
+                    save_run(checkpoint, dyn, extra=get_extra() if get_extra else None)
     finally:
         if bar is not None:
             bar.close()

@@ -20,6 +20,7 @@ from ..build import fcc_packing, repeat_lengths
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError, InstabilityError
+from ..io.checkpoint import load_run
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet, default_timestep
 from ..md.damped import TIMESTEP_FACTOR
@@ -243,7 +244,7 @@ def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", chec
 
 def restore_shock(path):
     """Rebuild a ShockSetup and its tracker from a shock checkpoint."""
-    atoms, dyn, extra = DampedVerlet.restart(path)
+    atoms, dyn, extra = load_run(path)
     try:
         p = extra["params"]
         tracker = ShockTracker.from_state(extra["tracker"])
