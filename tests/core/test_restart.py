@@ -43,8 +43,8 @@ def test_restart_in_a_new_process_is_bit_identical(tmp_path):
     save_run(tmp_path / "state.h5", e)
     code = textwrap.dedent(f"""
         import numpy as np
-        from clusterdyn.io.checkpoint import load_run, save_run
-        atoms, dyn, _ = DampedVerlet.restart({str(tmp_path / 'state.h5')!r})
+        from clusterdyn.io.checkpoint import load_run
+        atoms, dyn, _ = load_run({str(tmp_path / 'state.h5')!r})
         dyn.run({N})
         np.save({str(tmp_path / 'pos.npy')!r}, atoms.positions)
         np.save({str(tmp_path / 'mom.npy')!r}, atoms.get_momenta())
