@@ -236,43 +236,55 @@ TERMS_PER_VARIABLE = 24
 def _table_formulas(times_ps, vals, t0_ps, s):
     """LAMMPS formulas of U(s) and X(s) - X(t0) for one component of a piecewise-linear table.
 
-    ``U(s) = v_0 + sum_k ds_k max(s - t_k, 0)`` (ds_k: the slope change at knot
-    k; held before the first and after the last knot) and its integral
-    ``X(s) = v_0 s + sum_k ds_k max(s - t_k, 0)^2 / 2``; ``s`` is the name of
-    the variable holding clusterdyn's time in ps.  Returns two lists of terms.
+    ``U(s) = v_0 + sum_k ds_k r(s - t_k)`` with ``r(z) = (z + |z|)/2`` (exact in
+    floating point: z or 0; ds_k the slope change at knot k; held before the
+    first and after the last knot) and its integral ``X(s) = v_0 s + sum_k
+    ds_k r(s - t_k)^2 / 2``; ``s`` is the name of the variable holding
+    clusterdyn's time in ps.  Returns two lists of signed terms ("+a*...", "-b*...").
     """
     t = np.asarray(times_ps, dtype=float)
     v = np.asarray(vals, dtype=float)
     slopes = np.diff(v) / np.diff(t) if t.size > 1 else np.zeros(0)
     ds = np.diff(np.concatenate(([0.0], slopes, [0.0])))
-    u_terms = [f"{float(v[0])!r}"]
-    x_terms = [f"{float(v[0])!r}*({s}-{float(t0_ps)!r})"]
+
+    def term(c, expr=None):
+        c = float(c)
+        body = f"{abs(c)!r}" if expr is None else f"{abs(c)!r}*{expr}"
+        return ("-" if c < 0 else "+") + body
+
+    u_terms = [term(v[0])]
+    x_terms = [term(v[0], f"({s}-({float(t0_ps)!r}))")]
     x0 = 0.0
     for tk, dk in zip(t, ds):
         if dk == 0.0:
             continue
-        u_terms.append(f"{float(dk)!r}*max({s}-{float(tk)!r},0.0)")
-        x_terms.append(f"{0.5 * float(dk)!r}*max({s}-{float(tk)!r},0.0)^2")
+        z = f"({s}-({float(tk)!r}))"
+        r = f"(0.5*({z}+abs({z})))"
+        u_terms.append(term(dk, r))
+        x_terms.append(term(0.5 * dk, f"{r}^2"))
         x0 += 0.5 * float(dk) * max(float(t0_ps) - float(tk), 0.0) ** 2
     if x0 != 0.0:
-        x_terms.append(f"{-x0!r}")
+        x_terms.append(term(-x0))
     return u_terms, x_terms
 
 
 def _variable_lines(name, terms):
     """``variable name equal "..."``, split over helper variables of TERMS_PER_VARIABLE terms."""
+    def join(ts):
+        text = "".join(ts)
+        return text[1:] if text.startswith("+") else "0.0" + text
     if len(terms) <= TERMS_PER_VARIABLE:
-        return [f'variable        {name} equal "{"+".join(terms)}"']
+        return [f'variable        {name} equal "{join(terms)}"']
     out, parts = [], []
     for k in range(0, len(terms), TERMS_PER_VARIABLE):
         part = f"{name}_{k // TERMS_PER_VARIABLE}"
-        out.append(f'variable        {part} equal "{"+".join(terms[k:k + TERMS_PER_VARIABLE])}"')
-        parts.append(f"v_{part}")
-    out.append(f'variable        {name} equal "{"+".join(parts)}"')
+        out.append(f'variable        {part} equal "{join(terms[k:k + TERMS_PER_VARIABLE])}"')
+        parts.append(f"+v_{part}")
+    out.append(f'variable        {name} equal "{join(parts)}"')
     return out
 
 
-def drive_lines(atoms):
+def drive_lines(atoms, dt):
     """LAMMPS commands for the drives of ``atoms.constraints``.
 
     Returns ``({'groups': [...], 'fixes': [...]}, meta, held)``: the group and
@@ -282,10 +294,13 @@ def drive_lines(atoms):
 
     - :class:`~clusterdyn.md.Piston` with a constant U: ``fix move linear vx vy vz``;
     - Piston with a :class:`~clusterdyn.md.Table` U(t): ``fix move variable``
-      with equal-style displacement ``X(t) - X(t0)`` and velocity ``U(t)``
-      (t = clusterdyn's time, ``time`` + the drive's time at export), exact
-      for the piecewise-linear law, so the layer's positions are the same in
-      both codes;
+      with equal-style displacement ``X(t) - X(t0)`` (t = clusterdyn's time,
+      ``time`` + the drive's time at export; exact for the piecewise-linear
+      law, so the layer's positions are the same in both codes) and velocity
+      ``(X(t) - X(t - dt))/dt``, the mean of U over the step just taken: the
+      layer velocity clusterdyn's force pass sees (its half-step velocity, used
+      by the pair damping), so the damping is the same too; LAMMPS' dumps
+      therefore show that mean for the layer, not U(t) at the frame;
     - :class:`~clusterdyn.md.Wall`: ``region plane px py pz nx ny nz side in
       units box`` and ``fix wall/region ... harmonic K 1.0 d_c`` (with
       ``fix_modify energy yes``), one fix per material when K differs by
@@ -314,13 +329,19 @@ def drive_lines(atoms):
                 vals = h.values[:, None] * c.direction[None, :] if h.values.ndim == 1 else h.values
                 t_ps = h.times / units.PS
                 t0_ps = c.time / units.PS
+                if not dt > 0:
+                    raise InputError("dyn", None, "the dynamics (its time step) for a piston with a U(t) table")
+                dt_ps = float(dt) * units.TIME_TO_PS
                 svar = f"{name}_t"
                 fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
+                fixes.append(f'variable        {svar}m equal "time+{t0_ps!r}-{dt_ps!r}"')
                 names = []
                 for d, ax in enumerate("xyz"):
-                    u_terms, x_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
+                    _, x_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
+                    _, xm_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}m")
                     fixes += _variable_lines(f"{name}_d{ax}", x_terms)
-                    fixes += _variable_lines(f"{name}_v{ax}", u_terms)
+                    fixes += _variable_lines(f"{name}_d{ax}m", xm_terms)
+                    fixes.append(f'variable        {name}_v{ax} equal "(v_{name}_d{ax}-v_{name}_d{ax}m)/{dt_ps!r}"')
                     names.append((f"v_{name}_d{ax}", f"v_{name}_v{ax}"))
                 fixes.append(f"fix             move_{name} {name} move variable "
                              + " ".join(n[0] for n in names) + " " + " ".join(n[1] for n in names))
@@ -339,7 +360,7 @@ def drive_lines(atoms):
                                  "periodic axes (LAMMPS wraps periodic coordinates)")
             K_t, dc_t = c.resolve(atoms)
             name = f"wall{k}"
-            p, n = c.point, c.normal
+            p, n = c.point.tolist(), c.normal.tolist()
             fixes.append(f"region          {name} plane {p[0]!r} {p[1]!r} {p[2]!r} {n[0]!r} {n[1]!r} {n[2]!r} "
                          "side in units box")
             base = "all"
@@ -361,7 +382,7 @@ def drive_lines(atoms):
                 fixes.append(f"fix             {name}{sfx} {g} wall/region {name} harmonic "
                              f"{float(K_t[t])!r} 1.0 {float(dc_t[t])!r}")
                 fixes.append(f"fix_modify      {name}{sfx} energy yes")
-            meta[name] = {"kind": "Wall", "point_A": p.tolist(), "normal": n.tolist(),
+            meta[name] = {"kind": "Wall", "point_A": p, "normal": n,
                           "K_eV_per_A2": K_t.tolist(), "cutoff_A": dc_t.tolist()}
         elif isinstance(c, Traction):
             raise InputError("atoms.constraints", repr(c), "Piston or Wall drives (a traction has no faithful "
@@ -409,7 +430,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     if not isinstance(calc, ClusterDynamics):
         raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
     calc.setup(atoms)
-    drive_cmds, groups, held = drive_lines(atoms)        # refusals come before any file is written
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    drive_cmds, groups, held = drive_lines(atoms, dt)    # refusals come before any file is written
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = len(atoms)
@@ -420,7 +442,6 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         skin = calc.nl.skin
     lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff)
     entries = write_tables(calc, folder / TABLE_FILE, n_points)
-    dt = float(dyn.dt) if dyn is not None else 0.0
     dt_ps = dt * units.TIME_TO_PS
     nsteps = 0 if nsteps is None else int(nsteps)
     J = getattr(dyn, "J", None)
