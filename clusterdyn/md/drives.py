@@ -53,6 +53,7 @@ Records (every drive)
     potential energy instead).  An energy ledger over all particles adds the
     layers' own kinetic energy change: ``E(t) - E(0) = sum(work) +
     dK_layers - dissipated``.
+
 A force sample is taken once per time (the first ``adjust_forces`` call at
 a new time; later calls at the same time, e.g. observers asking for forces,
 apply the constraint but do not record again).
@@ -720,7 +721,7 @@ class Traction(_Layer):
     friction : (3,) eV/Angstrom
         Tangential part of :attr:`force` (the friction the body exerts on the layer).
     normal_position : float, Angstrom
-        ``normal . `` the layer's centre of mass at the last force sample.
+        The layer's centre of mass along ``normal`` at the last force sample.
     normal_velocity : float, Angstrom/ASE-time
         The layer's velocity along ``normal`` (at the step's end).
     """
@@ -874,32 +875,57 @@ class Traction(_Layer):
 # -- the wall ------------------------------------------------------------------------------------
 
 @njit(cache=True)
+def _wall_candidates(x_nc, rows, n_c, p0, reach, touched):
+    """Rows with ``d = x . n - p0 < reach`` into ``touched``; returns (count, smallest d)."""
+    n0 = n_c[0]
+    n1 = n_c[1]
+    n2 = n_c[2]
+    dmin = np.inf
+    nt = 0
+    if rows.shape[0] == 0:
+        for i in range(x_nc.shape[0]):
+            d = x_nc[i, 0] * n0 + x_nc[i, 1] * n1 + x_nc[i, 2] * n2 - p0
+            dmin = min(dmin, d)
+            if d < reach:
+                touched[nt] = i
+                nt += 1
+    else:
+        for q in range(rows.shape[0]):
+            i = rows[q]
+            d = x_nc[i, 0] * n0 + x_nc[i, 1] * n1 + x_nc[i, 2] * n2 - p0
+            dmin = min(dmin, d)
+            if d < reach:
+                touched[nt] = i
+                nt += 1
+    return nt, dmin
+
+
+@njit(cache=True)
 def wall_harmonic(x_nc, f_nc, rows, types_n, point_c, n_c, K_t, dc_t, stick, touched, extra_nc):
     """Add the harmonic wall force to ``f`` and list the touched particles.
 
     For particle i (all rows, or ``rows`` when it has entries) at distance
-    ``d = (x_i - point) . n`` from the plane, if ``d < dc``: force
+    ``d = x_i . n - point . n`` from the plane, if ``d < dc``: force
     ``2 K (dc - d) n`` and energy ``K (dc - d)^2`` (K, dc of its type).  With
     ``stick`` the tangential part of ``f_i`` is removed as well.  The change
-    made to ``f_i`` goes to ``extra_nc[q]`` with ``touched[q] = i``.
+    made to ``f_i`` goes to ``extra_nc[q]`` with ``touched[q] = i``.  One
+    streaming pass finds the particles within the largest d_c (and the
+    smallest d); the forces are then computed on those alone.
     Returns (touched count, energy, sum of the changes (3), smallest d, its particle).
     """
-    n_all = rows.shape[0] == 0
-    nq = x_nc.shape[0] if n_all else rows.shape[0]
+    n0 = n_c[0]
+    n1 = n_c[1]
+    n2 = n_c[2]
+    p0 = point_c[0] * n0 + point_c[1] * n1 + point_c[2] * n2
+    nc, dmin = _wall_candidates(x_nc, rows, n_c, p0, dc_t.max(), touched)
     nt = 0
     e = 0.0
     fx = 0.0
     fy = 0.0
     fz = 0.0
-    dmin = np.inf
-    imin = -1
-    for q in range(nq):
-        i = q if n_all else rows[q]
-        d = ((x_nc[i, 0] - point_c[0]) * n_c[0] + (x_nc[i, 1] - point_c[1]) * n_c[1]
-             + (x_nc[i, 2] - point_c[2]) * n_c[2])
-        if d < dmin:
-            dmin = d
-            imin = i
+    for q in range(nc):
+        i = touched[q]
+        d = x_nc[i, 0] * n0 + x_nc[i, 1] * n1 + x_nc[i, 2] * n2 - p0
         t = types_n[i]
         dc = dc_t[t]
         if d < dc:
@@ -907,14 +933,14 @@ def wall_harmonic(x_nc, f_nc, rows, types_n, point_c, n_c, K_t, dc_t, stick, tou
             g = dc - d
             e += K * g * g
             fw = 2.0 * K * g
-            ex = fw * n_c[0]
-            ey = fw * n_c[1]
-            ez = fw * n_c[2]
+            ex = fw * n0
+            ey = fw * n1
+            ez = fw * n2
             if stick:
-                fn = f_nc[i, 0] * n_c[0] + f_nc[i, 1] * n_c[1] + f_nc[i, 2] * n_c[2]
-                ex -= f_nc[i, 0] - fn * n_c[0]
-                ey -= f_nc[i, 1] - fn * n_c[1]
-                ez -= f_nc[i, 2] - fn * n_c[2]
+                fn = f_nc[i, 0] * n0 + f_nc[i, 1] * n1 + f_nc[i, 2] * n2
+                ex -= f_nc[i, 0] - fn * n0
+                ey -= f_nc[i, 1] - fn * n1
+                ez -= f_nc[i, 2] - fn * n2
             f_nc[i, 0] += ex
             f_nc[i, 1] += ey
             f_nc[i, 2] += ez
@@ -926,19 +952,28 @@ def wall_harmonic(x_nc, f_nc, rows, types_n, point_c, n_c, K_t, dc_t, stick, tou
             fy += ey
             fz += ez
             nt += 1
+    imin = -1
+    if dmin < 0.0:                       # name the particle (a failing step only)
+        for q in range(x_nc.shape[0] if rows.shape[0] == 0 else rows.shape[0]):
+            i = q if rows.shape[0] == 0 else rows[q]
+            if x_nc[i, 0] * n0 + x_nc[i, 1] * n1 + x_nc[i, 2] * n2 - p0 == dmin:
+                imin = i
+                break
     return nt, e, fx, fy, fz, dmin, imin
 
 
 @njit(cache=True)
-def wall_energy(x_nc, rows, types_n, point_c, n_c, K_t, dc_t):
+def wall_energy(x_nc, rows, types_n, point_c, n_c, K_t, dc_t, touched):
     """Energy of the harmonic wall, sum of ``K (dc - d)^2`` over particles with ``d < dc``."""
-    n_all = rows.shape[0] == 0
-    nq = x_nc.shape[0] if n_all else rows.shape[0]
+    n0 = n_c[0]
+    n1 = n_c[1]
+    n2 = n_c[2]
+    p0 = point_c[0] * n0 + point_c[1] * n1 + point_c[2] * n2
+    nc, dmin = _wall_candidates(x_nc, rows, n_c, p0, dc_t.max(), touched)
     e = 0.0
-    for q in range(nq):
-        i = q if n_all else rows[q]
-        d = ((x_nc[i, 0] - point_c[0]) * n_c[0] + (x_nc[i, 1] - point_c[1]) * n_c[1]
-             + (x_nc[i, 2] - point_c[2]) * n_c[2])
+    for q in range(nc):
+        i = touched[q]
+        d = x_nc[i, 0] * n0 + x_nc[i, 1] * n1 + x_nc[i, 2] * n2 - p0
         t = types_n[i]
         if d < dc_t[t]:
             g = dc_t[t] - d
@@ -1141,7 +1176,9 @@ class Wall(Drive):
     def adjust_potential_energy(self, atoms):
         K_t, dc_t = self.resolve(atoms)
         x = np.ascontiguousarray(atoms.arrays["positions"], dtype=float)
-        return float(wall_energy(x, self._rows_arg(), self._types(atoms), self.point, self.normal, K_t, dc_t))
+        scratch = np.empty(len(atoms), np.int64)
+        return float(wall_energy(x, self._rows_arg(), self._types(atoms), self.point, self.normal, K_t, dc_t,
+                                 scratch))
 
     def index_shuffle(self, atoms, ind):
         if self.index is not None:
