@@ -5,5 +5,3 @@ from .drives import Constant, Drive, Function, Piston, Table, Traction, Wall, fr
 
 __all__ = ["DampedVerlet", "Piston", "Wall", "Traction", "Table", "Constant", "Function", "Drive",
            "from_state", "default_timestep", "pair_stability_limit", "stability_limit"]
-from ..mca.dynamics import MCADynamics  # noqa: E402,F401
-__all__ += ["MCADynamics"]

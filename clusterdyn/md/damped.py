@@ -88,7 +88,8 @@ class DampedVerlet(MolecularDynamics):
         calculator works when ``J=None``).
     timestep : float, optional
         ASE time units.  Default :func:`default_timestep` with the fastest
-        piston of ``atoms.constraints``.  Must be below the stability limit.
+        drive of ``atoms.constraints`` (its ``max_speed()``; a callable U(t) states none:
+        give the time step then).  Must be below the stability limit.
     J : float or None, default 50
         Damping Gamma = c0/(J r0), J in 10..100 in the method; ``None`` = off.
     check_interval : int, default 1
