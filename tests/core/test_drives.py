@@ -1,5 +1,7 @@
 """The drive and wall family: U(t) pistons, harmonic walls, tractions; in DampedVerlet and ASE's dynamics."""
 
+import json
+
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
@@ -218,8 +220,7 @@ def test_traction_presses_rigidly_and_shears():
     v = a.get_velocities()[tr.index]
     np.testing.assert_allclose(v[:, 1], tr.normal_velocity, rtol=1e-12)
     assert tr.friction[1] == 0.0 and tr.friction[2] == tr.force[2]
-    mob = ~top
-    dP = (a.get_momenta()[mob] - a.get_masses()[mob, None] * 0.0).sum(axis=0)
+    dP = a.get_momenta()[~top].sum(axis=0)                           # the block started at rest
     np.testing.assert_allclose(dP, wall.impulse + tr.impulse, rtol=0, atol=1e-9 * sigma * tr.area * t)
     assert abs(tr.normal_position - (x0[tr.index, 1].mean() + d[0, 1])) < 1e-9 * R0
 
@@ -284,7 +285,6 @@ def test_state_and_describe_round_trip():
         for k, v in st.items():
             if isinstance(v, np.ndarray):
                 assert np.array_equal(back.get_state()[k], v)
-        import json
         json.dumps(dr.describe())
     assert w.describe()["K_eV_per_A2"] == [3.0] and w.normal.tolist() == [0, 0, 1.0]
 
