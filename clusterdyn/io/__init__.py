@@ -9,13 +9,14 @@
   calculator from it, so analyses work from the file alone.
 - :func:`clusterdyn.io.mda.universe` -- an MDAnalysis Universe with masses, ids, material
   and grain ids (imported on demand: it imports MDAnalysis).
-- :func:`write_checkpoint`, :func:`read_checkpoint` -- bit-exact restart files.
+- :func:`write_checkpoint`, :func:`read_checkpoint` -- bit-exact restart files;
+  :func:`save_run`, :func:`load_run` -- a whole run (dynamics, calculator, drives) in one.
 """
 
 from clusterdyn.io.h5md import H5MDWriter, H5MDReader, read_h5md
 from clusterdyn.io.info import h5md_info, format_info
-from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint
+from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint, save_run, load_run, read_run_extra
 from clusterdyn.io.lammps import export_lammps, run_lammps  # noqa: F401  (LAMMPS scale-out)
 
 __all__ = ["H5MDWriter", "H5MDReader", "read_h5md", "h5md_info", "format_info",
-           "write_checkpoint", "read_checkpoint"]
+           "write_checkpoint", "read_checkpoint", "save_run", "load_run", "read_run_extra"]

@@ -27,6 +27,19 @@ Every node of an encoded dict carries a ``kind`` attribute: ``dict``,
 ``generator`` (a :class:`numpy.random.Generator`, restored with its bit
 generator state) and ``randomstate``.
 
+:func:`save_run` and :func:`load_run` put a whole run in such a file and
+take it back: the Atoms, the dynamics' state, the calculator's set-up, every
+constraint in order (the drives of :mod:`clusterdyn.md.drives` with their
+histories, records and time state; ASE constraints through ``todict()``)
+and the caller's ``extra``; the run continues bit for bit.  State layout::
+
+    /state/run_format       2
+    /state/dynamics_class   e.g. 'DampedVerlet' (a key of RUN_KINDS)
+    /state/dynamics         dyn.get_state()
+    /state/calculator       {'class': 'ClusterDynamics', 'parameters': {...}}
+    /state/constraints      [{'drive': drive.get_state()} or {'ase': JSON of c.todict()}, ...]
+    /state/extra            the caller's dict
+
 The file is written to a temporary file in the destination folder, synced,
 then moved over ``path`` with :func:`os.replace`, so ``path`` always holds a
 complete checkpoint (the previous one or the new one).  Arrays carry a
@@ -43,7 +56,8 @@ import numpy as np
 from clusterdyn.errors import InputError
 from clusterdyn.io._common import clusterdyn_version, open_h5_read
 
-__all__ = ["write_checkpoint", "read_checkpoint", "save_run", "load_run", "read_run_extra", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["write_checkpoint", "read_checkpoint", "save_run", "load_run", "read_run_extra", "register_run_kind",
+           "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "clusterdyn-checkpoint"
 FORMAT_VERSION = 1
@@ -384,21 +398,156 @@ def read_checkpoint(path):
     return atoms, state
 
 
+# -- whole runs: dynamics + calculator + constraints ---------------------------------------------
+
+#: version of the run layout under /state (1: DampedVerlet.checkpoint of earlier releases)
+RUN_FORMAT = 2
+
+#: dynamics class name -> (save(dyn) -> dict of 'dynamics' and 'calculator' states,
+#: load(atoms, state, **kwargs) -> dynamics); see :func:`register_run_kind`
+RUN_KINDS = {}
+
+
+def register_run_kind(name, save, load):
+    """Teach :func:`save_run` / :func:`load_run` another dynamics class.
+
+    ``save(dyn)`` returns a dict with at least ``'dynamics'`` (the dynamics'
+    own state, e.g. ``dyn.get_state()``) and ``'calculator'`` (what rebuilds
+    the calculator), encodable by :func:`write_checkpoint`.  ``load(atoms,
+    state, **kwargs)`` gets the Atoms with their constraints restored and the
+    whole stored state dict, attaches the calculator and returns the
+    dynamics, restored.  ``name`` is ``type(dyn).__name__``.  The constraints
+    and ``extra`` are handled by save_run/load_run for every kind.
+    """
+    RUN_KINDS[name] = (save, load)
+
+
+def _damped_save(dyn):
+    from clusterdyn.calculators.cluster import ClusterDynamics
+    if not isinstance(dyn.calc, ClusterDynamics):
+        raise InputError("dyn.calc", type(dyn.calc).__name__,
+                         "a ClusterDynamics calculator (save_run rebuilds it from its parameters)")
+    par = {k: v for k, v in dyn.calc.parameters.items() if v is not None}
+    if "materials" in par:
+        par["materials"] = [m if isinstance(m, str) else getattr(m, "name", m) for m in par["materials"]]
+    return {"dynamics": dyn.get_state(), "calculator": {"class": "ClusterDynamics", "parameters": par}}
+
+
+def _damped_load(atoms, state, **kwargs):
+    from clusterdyn.calculators.cluster import ClusterDynamics
+    from clusterdyn.md.damped import DampedVerlet
+    cal = state.get("calculator", {})
+    cpar = dict(cal.get("parameters", cal) if isinstance(cal, dict) else {})
+    cpar.pop("class", None)
+    if "materials" in cpar:
+        cpar["materials"] = [str(m) for m in np.atleast_1d(cpar["materials"])]
+    if "r0" in cpar:
+        cpar["r0"] = [float(r) for r in np.atleast_1d(cpar["r0"])]
+    atoms.calc = ClusterDynamics(**cpar)
+    dst = state["dynamics"]
+    J = float(dst["J"])
+    dyn = DampedVerlet(atoms, timestep=float(dst["dt"]), J=None if J < 0 else J, **kwargs)
+    dyn.set_state(dst)
+    return dyn
+
+
+register_run_kind("DampedVerlet", _damped_save, _damped_load)
+
+
 def save_run(path, dyn, extra=None):
-    """Write the full state of a run (Atoms, dynamics, drives, calculator set-up) and ``extra``."""
-    return dyn.checkpoint(path, extra=extra)
+    """Write a whole run to the checkpoint ``path``, atomically; returns ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination (its folder must exist); replaced only once complete.
+    dyn : ase.md.md.MolecularDynamics
+        A dynamics of a registered kind (:class:`~clusterdyn.md.DampedVerlet`;
+        others through :func:`register_run_kind`).  Its Atoms (every array),
+        its state, its calculator's set-up and the Atoms' constraints in order
+        are stored: drives (:mod:`clusterdyn.md.drives`) with their state,
+        ASE constraints through ``todict()``.
+    extra : dict, optional
+        Anything the caller needs back (scene parameters, analysis state, RNG
+        states), encodable by :func:`write_checkpoint`.
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        Before anything is written: a dynamics or calculator of an unknown
+        kind, a constraint that is neither a drive nor has ``todict()``, a
+        drive with a callable history (pass a Table), or an unencodable
+        ``extra``.
+    """
+    from clusterdyn.md.drives import Drive
+    from clusterdyn.io._common import to_jsonable
+    kind = type(dyn).__name__
+    if kind not in RUN_KINDS:
+        raise InputError("dyn", kind, "a dynamics save_run knows: " + ", ".join(RUN_KINDS))
+    atoms = dyn.atoms
+    cons = []
+    for c in atoms.constraints:
+        if isinstance(c, Drive):
+            cons.append({"drive": c.get_state()})
+        elif hasattr(c, "todict"):
+            cons.append({"ase": json.dumps(to_jsonable(c.todict()))})
+        else:
+            raise InputError("atoms.constraints", type(c).__name__,
+                             "drives of clusterdyn.md.drives or ASE constraints with todict()")
+    state = {"run_format": RUN_FORMAT, "dynamics_class": kind}
+    state.update(RUN_KINDS[kind][0](dyn))
+    state["constraints"] = cons
+    state["extra"] = extra if extra is not None else {}
+    kept = list(atoms.constraints)
+    atoms.set_constraint()
+    try:
+        write_checkpoint(path, atoms, state)
+    finally:
+        atoms.set_constraint(kept)
+    return path
 
 
-def load_run(path):
-    """``(atoms, dyn, extra)`` of a run saved by :func:`save_run`."""
-    from ..md import DampedVerlet
-    return DampedVerlet.restart(path)
+def _constraints(state, path):
+    from ase.constraints import dict2constraint
+    from clusterdyn.md.drives import from_state
+    items = state.get("constraints")
+    if items is None:                             # run_format 1: drives inside the dynamics' state
+        return [from_state(c) for c in state["dynamics"].get("constraints", [])]
+    out = []
+    for c in items:
+        if "drive" in c:
+            out.append(from_state(c["drive"]))
+        else:
+            out.append(dict2constraint(json.loads(c["ase"])))
+    return out
+
+
+def load_run(path, **kwargs):
+    """Rebuild ``(atoms, dyn, extra)`` from :func:`save_run`'s file.
+
+    ``kwargs`` go to the dynamics' constructor (e.g. ``logfile``).  N steps +
+    save_run + load_run + N steps equals 2N steps bit for bit: positions,
+    momenta, forces, every drive's records and time state.
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        The file is not a checkpoint (see :func:`read_checkpoint`) or not one
+        written by save_run (e.g. a bare write_checkpoint file).
+    """
+    atoms, state = read_checkpoint(path)
+    kind = state.get("dynamics_class", "DampedVerlet") if isinstance(state, dict) else None
+    if not isinstance(state, dict) or "dynamics" not in state or kind not in RUN_KINDS:
+        raise InputError("path", os.fspath(path), "a run checkpoint written by save_run",
+                         hint=f"dynamics class {kind!r}" if kind not in RUN_KINDS else None)
+    atoms.set_constraint(_constraints(state, path))
+    dyn = RUN_KINDS[kind][1](atoms, state, **kwargs)
+    return atoms, dyn, state.get("extra", {})
 
 
 def read_run_extra(path):
-    """The ``extra`` dict of a run checkpoint (the caller's state: scene, parameters, analysis)."""
+    """The ``extra`` dict of :func:`save_run`'s file, without rebuilding the run."""
     _, state = read_checkpoint(path)
-    extra = state.get("extra") if isinstance(state, dict) else None
-    if not isinstance(extra, dict):
-        raise InputError("--restart", os.fspath(path), "a checkpoint written by a clusterdyn run")
-    return extra
+    if not isinstance(state, dict) or "dynamics" not in state:
+        raise InputError("path", os.fspath(path), "a run checkpoint written by save_run")
+    return state.get("extra", {})

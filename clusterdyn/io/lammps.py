@@ -19,8 +19,12 @@
   with ``gamma_parallel = gamma_perp = m Gamma`` (eta of
   ``ClusterDynamics.damping_matrix``, converted to eV ps/Angstrom^2) and
   weight exponents 0, i.e. the force ``-m Gamma (v_i - v_j)`` on every pair
-  within the cutoff (``hybrid/overlay`` with the table), pistons and rigid
-  walls as ``fix move linear`` groups, the rest integrated by ``fix nve``
+  within the cutoff (``hybrid/overlay`` with the table), the drives of
+  :mod:`clusterdyn.md.drives` as fixes (:func:`drive_lines`: a constant
+  piston as ``fix move linear``, a piston with a U(t) table as ``fix move
+  variable`` with equal-style displacement and velocity variables, a wall as
+  ``fix wall/region`` on a plane region with the harmonic law; a traction, a
+  sticking wall or a callable U(t) are refused by name), the rest integrated by ``fix nve``
   (velocity Verlet; the damping then sees half-step velocities, as in
   :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
 - ``cd.json``: what the export knew (units, steps, groups, scene parameters).
@@ -225,6 +229,169 @@ def write_data(atoms, types, path, margin):
     return np.array(lo), np.array(hi), mass_t
 
 
+#: terms per equal-style variable of a U(t) table (long tables are split over several variables)
+TERMS_PER_VARIABLE = 24
+
+
+def _table_formulas(times_ps, vals, t0_ps, s):
+    """LAMMPS formulas of U(s) and X(s) - X(t0) for one component of a piecewise-linear table.
+
+    ``U(s) = v_0 + sum_k ds_k r(s - t_k)`` with ``r(z) = (z + |z|)/2`` (exact in
+    floating point: z or 0; ds_k the slope change at knot k; held before the
+    first and after the last knot) and its integral ``X(s) = v_0 s + sum_k
+    ds_k r(s - t_k)^2 / 2``; ``s`` is the name of the variable holding
+    clusterdyn's time in ps.  Returns two lists of signed terms ("+a*...", "-b*...").
+    """
+    t = np.asarray(times_ps, dtype=float)
+    v = np.asarray(vals, dtype=float)
+    slopes = np.diff(v) / np.diff(t) if t.size > 1 else np.zeros(0)
+    ds = np.diff(np.concatenate(([0.0], slopes, [0.0])))
+
+    def term(c, expr=None):
+        c = float(c)
+        body = f"{abs(c)!r}" if expr is None else f"{abs(c)!r}*{expr}"
+        return ("-" if c < 0 else "+") + body
+
+    u_terms = [term(v[0])]
+    x_terms = [term(v[0], f"({s}-({float(t0_ps)!r}))")]
+    x0 = 0.0
+    for tk, dk in zip(t, ds):
+        if dk == 0.0:
+            continue
+        z = f"({s}-({float(tk)!r}))"
+        r = f"(0.5*({z}+abs({z})))"
+        u_terms.append(term(dk, r))
+        x_terms.append(term(0.5 * dk, f"{r}^2"))
+        x0 += 0.5 * float(dk) * max(float(t0_ps) - float(tk), 0.0) ** 2
+    if x0 != 0.0:
+        x_terms.append(term(-x0))
+    return u_terms, x_terms
+
+
+def _variable_lines(name, terms):
+    """``variable name equal "..."``, split over helper variables of TERMS_PER_VARIABLE terms."""
+    def join(ts):
+        text = "".join(ts)
+        return text[1:] if text.startswith("+") else "0.0" + text
+    if len(terms) <= TERMS_PER_VARIABLE:
+        return [f'variable        {name} equal "{join(terms)}"']
+    out, parts = [], []
+    for k in range(0, len(terms), TERMS_PER_VARIABLE):
+        part = f"{name}_{k // TERMS_PER_VARIABLE}"
+        out.append(f'variable        {part} equal "{join(terms[k:k + TERMS_PER_VARIABLE])}"')
+        parts.append(f"+v_{part}")
+    out.append(f'variable        {name} equal "{join(parts)}"')
+    return out
+
+
+def drive_lines(atoms, dt):
+    """LAMMPS commands for the drives of ``atoms.constraints``.
+
+    Returns ``({'groups': [...], 'fixes': [...]}, meta, held)``: the group and
+    fix (and variable, region) commands, a JSON-able description per drive
+    for cd.json, and the names of the groups that ``fix move`` integrates
+    (not ``fix nve``).
+
+    - :class:`~clusterdyn.md.Piston` with a constant U: ``fix move linear vx vy vz``;
+    - Piston with a :class:`~clusterdyn.md.Table` U(t): ``fix move variable``
+      with equal-style displacement ``X(t) - X(t0)`` (t = clusterdyn's time,
+      ``time`` + the drive's time at export; exact for the piecewise-linear
+      law, so the layer's positions are the same in both codes) and velocity
+      ``(X(t) - X(t - dt))/dt``, the mean of U over the step just taken: the
+      layer velocity clusterdyn's force pass sees (its half-step velocity, used
+      by the pair damping), so the damping is the same too; LAMMPS' dumps
+      therefore show that mean for the layer, not U(t) at the frame;
+    - :class:`~clusterdyn.md.Wall`: ``region plane px py pz nx ny nz side in
+      units box`` and ``fix wall/region ... harmonic K 1.0 d_c`` (with
+      ``fix_modify energy yes``), one fix per material when K differs by
+      material; its normal must be perpendicular to the periodic axes
+      (LAMMPS wraps periodic coordinates);
+
+    refused in one line (:class:`~clusterdyn.errors.InputError` naming the
+    drive): a :class:`~clusterdyn.md.Traction`, a sticking wall, a callable
+    U(t), any other constraint.
+    """
+    from ..md.drives import Constant, Piston, Table, Traction, Wall
+    groups, fixes, meta, held = [], [], {}, []
+    V = units.VEL_TO_A_PER_PS
+    for k, c in enumerate(atoms.constraints):
+        if isinstance(c, Piston):
+            name = f"piston{k}"
+            ids = np.asarray(c.index) + 1
+            groups += _group_lines(name, ids)
+            held.append(name)
+            if isinstance(c.history, Constant):
+                v = (c.velocity_at(c.time) * V).tolist()
+                fixes.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
+                meta[name] = {"kind": "Piston", "law": "constant", "n": int(ids.size), "velocity_A_per_ps": v}
+            elif isinstance(c.history, Table):
+                h = c.history
+                vals = h.values[:, None] * c.direction[None, :] if h.values.ndim == 1 else h.values
+                t_ps = h.times / units.PS
+                t0_ps = c.time / units.PS
+                if not dt > 0:
+                    raise InputError("dyn", None, "the dynamics (its time step) for a piston with a U(t) table")
+                dt_ps = float(dt) * units.TIME_TO_PS
+                svar = f"{name}_t"
+                fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
+                fixes.append(f'variable        {svar}m equal "time+{t0_ps!r}-{dt_ps!r}"')
+                names = []
+                for d, ax in enumerate("xyz"):
+                    _, x_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
+                    _, xm_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}m")
+                    fixes += _variable_lines(f"{name}_d{ax}", x_terms)
+                    fixes += _variable_lines(f"{name}_d{ax}m", xm_terms)
+                    fixes.append(f'variable        {name}_v{ax} equal "(v_{name}_d{ax}-v_{name}_d{ax}m)/{dt_ps!r}"')
+                    names.append((f"v_{name}_d{ax}", f"v_{name}_v{ax}"))
+                fixes.append(f"fix             move_{name} {name} move variable "
+                             + " ".join(n[0] for n in names) + " " + " ".join(n[1] for n in names))
+                meta[name] = {"kind": "Piston", "law": "table", "n": int(ids.size), "t0_ps": t0_ps,
+                              "t_ps": t_ps.tolist(), "velocity_A_per_ps": (vals * V).tolist()}
+            else:
+                raise InputError("atoms.constraints", f"Piston with a callable U(t) ({c.history!r})",
+                                 "a constant or Table history (a Python callable has no LAMMPS form)")
+        elif isinstance(c, Wall):
+            if c.sticking:
+                raise InputError("atoms.constraints", repr(c),
+                                 "a frictionless wall (LAMMPS' fix wall/region has no sticking law)")
+            per = np.abs(c.normal[np.asarray(atoms.pbc, bool)])
+            if per.size and per.max() > 0:
+                raise InputError("atoms.constraints", repr(c), "a wall whose normal is perpendicular to the "
+                                 "periodic axes (LAMMPS wraps periodic coordinates)")
+            K_t, dc_t = c.resolve(atoms)
+            name = f"wall{k}"
+            p, n = c.point.tolist(), c.normal.tolist()
+            fixes.append(f"region          {name} plane {p[0]!r} {p[1]!r} {p[2]!r} {n[0]!r} {n[1]!r} {n[2]!r} "
+                         "side in units box")
+            base = "all"
+            if c.index is not None:
+                groups += _group_lines(f"{name}_sel", np.asarray(c.index) + 1)
+                base = f"{name}_sel"
+            targets = [(base, 0, "")]
+            if K_t.size > 1:
+                targets = []
+                for t in range(K_t.size):
+                    g = f"{name}_type{t + 1}"
+                    if base == "all":
+                        groups.append(f"group           {g} type {t + 1}")
+                    else:
+                        groups.append(f"group           {g}_all type {t + 1}")
+                        groups.append(f"group           {g} intersect {g}_all {base}")
+                    targets.append((g, t, f"_{t + 1}"))
+            for g, t, sfx in targets:
+                fixes.append(f"fix             {name}{sfx} {g} wall/region {name} harmonic "
+                             f"{float(K_t[t])!r} 1.0 {float(dc_t[t])!r}")
+                fixes.append(f"fix_modify      {name}{sfx} energy yes")
+            meta[name] = {"kind": "Wall", "point_A": p, "normal": n,
+                          "K_eV_per_A2": K_t.tolist(), "cutoff_A": dc_t.tolist()}
+        elif isinstance(c, Traction):
+            raise InputError("atoms.constraints", repr(c), "Piston or Wall drives (a traction has no faithful "
+                             "LAMMPS form in this export)")
+        else:
+            raise InputError("atoms.constraints", type(c).__name__, "Piston or Wall drives (exportable as fixes)")
+    return {"groups": groups, "fixes": fixes}, meta, held
+
+
 @dataclass
 class ExportInfo:
     folder: Path
@@ -260,10 +427,11 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     Returns the folder (a :class:`pathlib.Path`).
     """
     from ..calculators.cluster import ClusterDynamics
-    from ..md.boundaries import Piston, RigidWall
     if not isinstance(calc, ClusterDynamics):
         raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
     calc.setup(atoms)
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    drive_cmds, groups, held = drive_lines(atoms, dt)    # refusals come before any file is written
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = len(atoms)
@@ -274,7 +442,6 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         skin = calc.nl.skin
     lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff)
     entries = write_tables(calc, folder / TABLE_FILE, n_points)
-    dt = float(dyn.dt) if dyn is not None else 0.0
     dt_ps = dt * units.TIME_TO_PS
     nsteps = 0 if nsteps is None else int(nsteps)
     J = getattr(dyn, "J", None)
@@ -310,25 +477,13 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
                 lines.append(f"pair_coeff      {a + 1} {b + 1} dpd/ext/tstat {g!r} {g!r} 0.0 0.0 {rc_ab!r}")
     lines += [f"neighbor        {float(skin)!r} bin",
               "neigh_modify    every 1 delay 0 check yes"]
-    groups = {}
-    held = []
-    for k, c in enumerate(atoms.constraints):
-        if isinstance(c, Piston):
-            name = f"{'wall' if isinstance(c, RigidWall) else 'piston'}{k}"
-            ids = np.asarray(c.index) + 1
-            lines += _group_lines(name, ids)
-            v = (np.asarray(c.velocity, dtype=float) * units.VEL_TO_A_PER_PS).tolist()
-            groups[name] = {"ids": ids.tolist(), "velocity_A_per_ps": v}
-            held.append((name, v))
-        else:
-            raise InputError("atoms.constraints", type(c).__name__, "Piston or RigidWall (exportable as fixes)")
+    lines += drive_cmds["groups"]
     if held:
-        lines.append("group           mobile subtract all " + " ".join(h[0] for h in held))
+        lines.append("group           mobile subtract all " + " ".join(held))
         lines.append("fix             integrate mobile nve")
-        for name, v in held:
-            lines.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
     else:
         lines.append("fix             integrate all nve")
+    lines += drive_cmds["fixes"]
     lines += [
         f"timestep        {float(dt_ps)!r}",
         "thermo_style    custom step time pe ke etotal",
@@ -346,8 +501,7 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
     meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
             "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
-            "skin_A": float(skin), "groups": {k: {"velocity_A_per_ps": v["velocity_A_per_ps"],
-                                                  "n": len(v["ids"])} for k, v in groups.items()},
+            "skin_A": float(skin), "groups": groups,
             "tables": [{"a": a, "b": b, "entry": e, "r_lo_A": lo_, "r_hi_A": hi_}
                        for a, b, e, lo_, hi_ in entries],
             "units": "metal", "extra": extra or {}}

@@ -1,6 +1,7 @@
-"""Dynamics (ASE MolecularDynamics subclasses) and boundary conditions."""
+"""Dynamics (ASE MolecularDynamics subclasses) and the drive and wall family."""
 
-from .boundaries import Piston, RigidWall
 from .damped import DampedVerlet, default_timestep, pair_stability_limit, stability_limit
+from .drives import Constant, Drive, Function, Piston, Table, Traction, Wall, from_state
 
-__all__ = ["DampedVerlet", "Piston", "RigidWall", "default_timestep", "pair_stability_limit", "stability_limit"]
+__all__ = ["DampedVerlet", "Piston", "Wall", "Traction", "Table", "Constant", "Function", "Drive",
+           "from_state", "default_timestep", "pair_stability_limit", "stability_limit"]

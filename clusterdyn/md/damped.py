@@ -22,7 +22,7 @@ from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
 from ..parallel import use_threads
 from . import _integrate as I
-from .boundaries import Piston, RigidWall
+from .drives import Drive
 
 #: default time step as a fraction of r0/(c0 + u_max); see :func:`default_timestep`
 TIMESTEP_FACTOR = 0.03
@@ -88,7 +88,8 @@ class DampedVerlet(MolecularDynamics):
         calculator works when ``J=None``).
     timestep : float, optional
         ASE time units.  Default :func:`default_timestep` with the fastest
-        piston of ``atoms.constraints``.  Must be below the stability limit.
+        drive of ``atoms.constraints`` (its ``max_speed()``; a callable U(t) states none:
+        give the time step then).  Must be below the stability limit.
     J : float or None, default 50
         Damping Gamma = c0/(J r0), J in 10..100 in the method; ``None`` = off.
     check_interval : int, default 1
@@ -124,12 +125,15 @@ class DampedVerlet(MolecularDynamics):
                              "a ClusterDynamics calculator when damping is on (J given)")
         self.J = J
         self.calc = calc
-        u_max = max([np.linalg.norm(c.velocity) for c in atoms.constraints if isinstance(c, Piston)]
-                    + [0.0])
+        speeds = [c.max_speed() for c in atoms.constraints if isinstance(c, Drive)]
+        u_max = max([s for s in speeds if s is not None] + [0.0])
         self.stability_limit = stability_limit(calc) if isinstance(calc, ClusterDynamics) else None
         if timestep is None:
             if not isinstance(calc, ClusterDynamics):
                 raise InputError("timestep", None, "a time step (no default without ClusterDynamics)")
+            if None in speeds:
+                raise InputError("timestep", None, "a time step: the default needs the drives' largest speed, "
+                                 "which a callable U(t) does not state (give timestep= or a Table)")
             timestep = default_timestep(calc, u_max)
         try:
             ts = float(timestep)
@@ -152,6 +156,24 @@ class DampedVerlet(MolecularDynamics):
         self._fturn = 0
         self._safe = {}
         self.timings = {"forces": 0.0, "integrate": 0.0}
+        self._drives()
+
+    def _drives(self):
+        """The drives among the constraints, bound to this dynamics (binds new ones)."""
+        ds = []
+        for c in self.atoms.constraints:
+            if isinstance(c, Drive):
+                if c._dyn is not self:
+                    c.bind(self)
+                ds.append(c)
+        return ds
+
+    def _constraint_energy(self):
+        e = 0.0
+        for c in self.atoms.constraints:
+            if hasattr(c, "adjust_potential_energy"):
+                e += c.adjust_potential_energy(self.atoms)
+        return e
 
     def todict(self):
         d = super().todict()
@@ -165,9 +187,17 @@ class DampedVerlet(MolecularDynamics):
         return 1.0 / m
 
     def _compute_forces(self, kick=None):
-        """Forces at the current positions (constraints applied).  ``kick = h``: the
-        ClusterDynamics loop also adds ``h * forces`` to the momenta (fused second half kick)."""
+        """Forces at the current positions (constraints applied).
+
+        ``kick = h``: the second half kick, ``momenta += h * forces``: the
+        calculator's forces are kicked first (inside the ClusterDynamics loop),
+        then the constraints adjust the forces, then the drives that added
+        forces (walls) kick their rows with what they added.  Kicks are linear,
+        so this is the kick with the total forces; its order of operations is
+        the same in every path (fused or not, fresh or restarted).
+        """
         atoms = self.atoms
+        drives = self._drives()
         t0 = time.perf_counter()
         if isinstance(self.calc, ClusterDynamics):
             damping = None
@@ -186,10 +216,15 @@ class DampedVerlet(MolecularDynamics):
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
                 self._check_stiffness()
         else:
-            forces = atoms.get_forces(apply_constraint=False)
+            forces = np.ascontiguousarray(atoms.get_forces(apply_constraint=False), dtype=float)
             self.potential_energy = atoms.get_potential_energy()
+            if kick is not None:
+                I.kick(atoms.arrays["momenta"], forces, kick)
         for c in atoms.constraints:
             c.adjust_forces(atoms, forces)
+        if kick is not None:
+            for d in drives:
+                d.kick_extra(atoms.arrays["momenta"], kick)
         self._own_forces = True
         self.timings["forces"] += time.perf_counter() - t0
         return forces
@@ -197,7 +232,8 @@ class DampedVerlet(MolecularDynamics):
     @property
     def potential_energy(self):
         if self._epot is None and self.forces is not None and isinstance(self.calc, ClusterDynamics):
-            self._epot = self.calc.compute(self.atoms, step=self.nsteps, virial=False)["energy"]
+            self._epot = (self.calc.compute(self.atoms, step=self.nsteps, virial=False)["energy"]
+                          + self._constraint_energy())
         return self._epot
 
     @potential_energy.setter
@@ -252,6 +288,20 @@ class DampedVerlet(MolecularDynamics):
             self.forces = self._compute_forces()
 
     def step(self, forces=None):
+        """One velocity-Verlet step (returns the forces at the new positions).
+
+        With the ClusterDynamics calculator and drives of
+        :mod:`clusterdyn.md.drives` only (any mix of pistons, walls and
+        tractions, or none), the first half kick and the drift run fused with
+        the calculator's gathers and the second half kick inside its force
+        pass (the fast path).  The drives set their layers' momenta before the
+        first kick (their forces are zero, so the kick leaves them) and after
+        the second; a wall's forces, added by ``adjust_forces``, get their
+        half kick on the touched rows after the calculator's.  Other ASE
+        constraints (``FixAtoms`` ...) take the separate passes, with the
+        drift through ``atoms.set_positions`` so that their
+        ``adjust_positions`` applies.
+        """
         atoms = self.atoms
         if self.forces is None or forces is not None:
             self._invm_n = self._invm()
@@ -262,24 +312,21 @@ class DampedVerlet(MolecularDynamics):
         use_threads(len(atoms))
         p = atoms.arrays["momenta"]
         h = 0.5 * self.dt
-        # Pistons and walls only (or no constraints) with the CD calculator: the kicks and the
-        # drift run inside the calculator's streaming passes.  A piston's momenta are fixed and
-        # its forces were zeroed by adjust_forces, so setting them before the kick is the same.
-        pistons_only = all(isinstance(c, Piston) for c in atoms.constraints)
-        fused = self._own_forces and isinstance(self.calc, ClusterDynamics) and pistons_only
+        cons = atoms.constraints
+        drives = self._drives()
+        foreign = len(drives) != len(cons)
+        for d in drives:
+            d.begin_step()
+        for c in cons:
+            c.adjust_momenta(atoms, p)
         res = None
-        if fused:
-            for c in atoms.constraints:
-                c.adjust_momenta(atoms, p)
+        if self._own_forces and not foreign and isinstance(self.calc, ClusterDynamics):
             res = self.calc._advance(atoms, p, self.forces, invm, h, self.dt, self._eta is not None)
-            fused = res is not None
-        if fused:
+        if res is not None:
             v2max, k = res
         else:
             I.kick(p, self.forces, h)
-            for c in atoms.constraints:
-                c.adjust_momenta(atoms, p)
-            if not pistons_only:
+            if foreign:
                 new = atoms.positions + self.dt * p * invm[:, None]
                 atoms.set_positions(new)
                 v2 = (p * p).sum(axis=1) * invm ** 2
@@ -287,13 +334,13 @@ class DampedVerlet(MolecularDynamics):
                 v2max = v2[k]
             else:
                 v2max, k = I.drift(atoms.arrays["positions"], p, invm, self.dt)
+        for d in drives:
+            d.end_drift()
         self._check_speed(v2max, k)
         self.timings["integrate"] += time.perf_counter() - t0
-        self.forces = self._compute_forces(kick=h if fused else None)
+        self.forces = self._compute_forces(kick=h)
         t0 = time.perf_counter()
-        if not fused:
-            I.kick(p, self.forces, h)
-        for c in atoms.constraints:
+        for c in cons:
             c.adjust_momenta(atoms, p)
         self.timings["integrate"] += time.perf_counter() - t0
         return self.forces
@@ -332,59 +379,12 @@ class DampedVerlet(MolecularDynamics):
             self._refresh_properties()
         return self.get_kinetic_energy() + self.potential_energy
 
-    # -- checkpoint state ------------------------------------------------------------
-    def checkpoint(self, path, extra=None):
-        """Write the full state atomically (Atoms, dynamics, boundaries, calculator set-up).
-
-        ``extra`` is any nested dict of arrays/scalars the caller needs back
-        (scene parameters, analysis frames, RNG states).  Restore with
-        :meth:`DampedVerlet.restart`; N steps + restart + N steps equals 2N
-        steps bit for bit.
-        """
-        from ..io.checkpoint import write_checkpoint
-        state = {"dynamics": self.get_state(), "extra": extra or {}}
-        if isinstance(self.calc, ClusterDynamics):
-            state["calculator"] = {k: v for k, v in self.calc.parameters.items() if v is not None}
-        atoms = self.atoms.copy()
-        atoms.set_constraint()
-        write_checkpoint(path, atoms, state)
-        return path
-
-    @classmethod
-    def restart(cls, path, **kwargs):
-        """Rebuild (atoms, dynamics, extra) from :meth:`checkpoint`'s file."""
-        from ..io.checkpoint import read_checkpoint
-        atoms, state = read_checkpoint(path)
-        try:
-            dst = state["dynamics"]
-            cpar = dict(state.get("calculator", {}))
-        except (KeyError, TypeError):
-            raise InputError("checkpoint", str(path), "a checkpoint written by DampedVerlet.checkpoint") from None
-        for k in ("materials",):
-            if k in cpar:
-                cpar[k] = [str(m) for m in np.atleast_1d(cpar[k])]
-        if "r0" in cpar:
-            cpar["r0"] = [float(r) for r in np.atleast_1d(cpar["r0"])]
-        cons = []
-        for c in dst.get("constraints", []):
-            if c["kind"] == "RigidWall":
-                w = RigidWall(c["index"])
-            else:
-                w = Piston(c["index"], c["velocity"])
-            w.force = np.array(c["force"], dtype=float)
-            cons.append(w)
-        atoms.set_constraint(cons)
-        atoms.calc = ClusterDynamics(**cpar)
-        J = float(dst["J"])
-        dyn = cls(atoms, timestep=float(dst["dt"]), J=None if J < 0 else J, **kwargs)
-        dyn.set_state(dst)
-        return atoms, dyn, state.get("extra", {})
-
+    # -- checkpoint state (files: clusterdyn.io.checkpoint.save_run / load_run) ----------------
     def get_state(self):
-        """Everything a bit-identical restart needs besides the Atoms."""
+        """Everything a bit-identical restart needs besides the Atoms and their constraints
+        (which :func:`clusterdyn.io.checkpoint.save_run` stores with the drives' own state)."""
         nl = getattr(self.calc, "nl", None)
-        st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J,
-              "constraints": [c.get_state() for c in self.atoms.constraints if hasattr(c, "get_state")]}
+        st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J}
         if nl is not None and nl.ref_nc is not None:
             st["nl_ref"] = nl.ref_nc.copy()
         if self.forces is not None:

@@ -76,29 +76,33 @@ COLUMNS = [("u", "u km/s", ".3g"), ("dt_default", "dt default", ".4f"), ("dt_lim
 
 
 class EnergyBalance:
-    """Observer: energy error ``E - E(0) - W_piston`` after every step (attach with interval 1)."""
+    """Observer: energy error ``E - E(0) - W`` after every step (attach with interval 1).
+
+    ``W`` is the work the pistons have done on the sample since the first
+    call (:attr:`clusterdyn.md.Piston.work`, the trapezoid integral of
+    ``-force . U`` over the steps); constant-velocity pistons keep their own
+    kinetic energy, so ``E - E(0) - W`` is the integrator's error.
+    """
 
     def __init__(self, dyn, atoms, pistons):
         self.dyn, self.atoms, self.pistons = dyn, atoms, pistons
         self.E0 = None
-        self.W = 0.0
-        self.F_prev = None
+        self.W0 = 0.0
         self.errors = []
         self.min_r = math.inf
 
-    def _piston_power(self):
-        return sum(-float(np.dot(p.force, p.velocity)) for p in self.pistons)
+    @property
+    def W(self):
+        """Work of the pistons since the first call, eV."""
+        return sum(p.work for p in self.pistons) - self.W0
 
     def __call__(self):
         dyn = self.dyn
         E = dyn.get_total_energy()
-        pw = self._piston_power()
+        W = sum(p.work for p in self.pistons)
         if self.E0 is None:
-            self.E0 = E
-        else:
-            self.W += 0.5 * (self.F_prev + pw) * dyn.dt
-        self.F_prev = pw
-        self.errors.append(E - self.E0 - self.W)
+            self.E0, self.W0 = E, W
+        self.errors.append(E - self.E0 - (W - self.W0))
         st = dyn.calc.last_stats
         if st is not None:
             self.min_r = min(self.min_r, st["min_r_over_r0"])

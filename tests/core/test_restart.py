@@ -7,7 +7,7 @@ import textwrap
 import numpy as np
 
 from clusterdyn import units
-from clusterdyn.md import DampedVerlet
+from clusterdyn.io.checkpoint import load_run, save_run
 from clusterdyn.scenes.shock import build_shock
 
 N = 150
@@ -24,9 +24,9 @@ def test_restart_is_bit_identical(tmp_path):
     b, e = make()
     e.run(N)
     path = tmp_path / "state.h5"
-    e.checkpoint(path, extra={"note": "half way"})
+    save_run(path, e, extra={"note": "half way"})
     del b, e
-    c, f, extra = DampedVerlet.restart(path)
+    c, f, extra = load_run(path)
     assert extra["note"] == "half way" and f.nsteps == N and f.J == 50
     f.run(N)
     assert f.nsteps == 2 * N
@@ -40,11 +40,11 @@ def test_restart_in_a_new_process_is_bit_identical(tmp_path):
     d.run(2 * N)
     b, e = make()
     e.run(N)
-    e.checkpoint(tmp_path / "state.h5")
+    save_run(tmp_path / "state.h5", e)
     code = textwrap.dedent(f"""
         import numpy as np
-        from clusterdyn.md import DampedVerlet
-        atoms, dyn, _ = DampedVerlet.restart({str(tmp_path / 'state.h5')!r})
+        from clusterdyn.io.checkpoint import load_run
+        atoms, dyn, _ = load_run({str(tmp_path / 'state.h5')!r})
         dyn.run({N})
         np.save({str(tmp_path / 'pos.npy')!r}, atoms.positions)
         np.save({str(tmp_path / 'mom.npy')!r}, atoms.get_momenta())

@@ -162,3 +162,39 @@ def test_ranges_and_parsers(tmp_path):
            "Loop time of 1.5 on 2 procs for 10 steps with 100 atoms\n\nNeighbor list builds = 3\n")
     loop, thermo, builds = _parse_log("\n" + log)
     assert loop[-1] == ("1.5", "2", "10", "100") and builds == 3 and thermo[1][2] == -1.5
+
+
+def test_drive_fixes_in_the_deck(tmp_path):
+    """A wall becomes a plane region + fix wall/region harmonic with the wall's own K and d_c; a U(t)
+    table piston becomes fix move variable; refusals name the drive and write nothing."""
+    from clusterdyn.errors import InputError
+    from clusterdyn.md import DampedVerlet, Piston, Table, Traction, Wall
+    s = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=None, seed=2)
+    a = s.atoms
+    x_max = a.positions[:, 0].max()
+    w = Wall([x_max + 0.55 * s.calc.potentials[0].r0, 0, 0], [-1.0, 0.0, 0.0])
+    p = Piston(s.piston.index, Table([0.0, 1 * units.ns], [0.0, 3 * units.km_s]))
+    a.set_constraint([p, w])
+    dyn = DampedVerlet(a, timestep=s.dyn.dt, J=None)
+    export_lammps(a, s.calc, dyn, tmp_path / "ok", nsteps=10, frames=1)
+    text = (tmp_path / "ok" / "in.cd").read_text()
+    K, dc = w.resolve(a)
+    assert f"region          wall1 plane {float(w.point[0])!r} 0.0 0.0 -1.0 0.0 0.0 side in units box" in text
+    assert f"fix             wall1 all wall/region wall1 harmonic {float(K[0])!r} 1.0 {float(dc[0])!r}" in text
+    assert "fix_modify      wall1 energy yes" in text
+    assert re.search(r"fix\s+move_piston0 piston0 move variable v_piston0_dx v_piston0_dy v_piston0_dz "
+                     r"v_piston0_vx v_piston0_vy v_piston0_vz", text)
+    assert "max(" not in text
+    meta = json.loads((tmp_path / "ok" / "cd.json").read_text())
+    assert meta["groups"]["wall1"]["K_eV_per_A2"] == [K[0]] and meta["groups"]["piston0"]["law"] == "table"
+    bad = [
+        ([Traction(s.piston.index, [-1, 0, 0], 1e-3, area=1.0)], "Traction"),
+        ([Wall([0, 0, 0], [1, 0, 0], sticking=True)], "sticking"),
+        ([Piston(s.piston.index, lambda t: 1.0)], "callable"),
+        ([Wall([0, 0, 0], [0, 1, 0])], "periodic"),
+    ]
+    for cons, word in bad:
+        a.set_constraint(cons)
+        with pytest.raises(InputError, match=f"^atoms.constraints=.*{word}") as exc:
+            export_lammps(a, s.calc, dyn, tmp_path / word, nsteps=10)
+        assert "\n" not in str(exc.value) and not (tmp_path / word).exists()
