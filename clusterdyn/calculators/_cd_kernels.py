@@ -50,8 +50,9 @@ order) only repels: zero force beyond r0_ab and energy ``E(r) - E(r0_ab)``
 inside, so it stays conservative.
 
 Outputs per chunk: ``stat_k[k]`` = (energy, smallest r^2/r0_ab^2, its row i,
-its row j (-1 when not tracked), number of pairs closer than the table), ``vir_k6[k]`` = pair
-virial (xx yy zz yz xz xy), eV.
+its row j (-1 when not tracked), number of pairs closer than the table, the power the pair
+damping dissipates ``sum eta |v_i - v_j|^2`` (``DAMP`` variants; 0 otherwise)), ``vir_k6[k]`` =
+pair virial (xx yy zz yz xz xy), eV.
 """
 
 import numpy as np
@@ -276,6 +277,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
     ci = -1
     cj = -1
     nclose = 0
+    dissip = 0.0
     for i in range(bounds_k[k], bounds_k[k + 1]):
         if MULTI:
             a = type_s[i]
@@ -385,9 +387,13 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             if DAMP:
                 if MULTI:
                     eta = eta_tt[a, b]
-                fx += eta * (vxi - vs_nc[ju, 0])
-                fy += eta * (vyi - vs_nc[ju, 1])
-                fz += eta * (vzi - vs_nc[ju, 2])
+                dvx = vxi - vs_nc[ju, 0]
+                dvy = vyi - vs_nc[ju, 1]
+                dvz = vzi - vs_nc[ju, 2]
+                fx += eta * dvx
+                fy += eta * dvy
+                fz += eta * dvz
+                dissip += eta * (dvx * dvx + dvy * dvy + dvz * dvz)
             fxi -= fx
             fyi -= fy
             fzi -= fz
@@ -411,6 +417,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
     stat_k[k, 2] = ci
     stat_k[k, 3] = cj
     stat_k[k, 4] = nclose
+    stat_k[k, 5] = dissip
     vir_k6[k, 0] = vxx
     vir_k6[k, 1] = vyy
     vir_k6[k, 2] = vzz

@@ -245,7 +245,7 @@ class ClusterDynamics(Calculator):
             nk = max(1, n // K.CHUNK_ROWS)
             (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], lay["shared_n"],
              lay["shared_r"], lay["owner_r"]) = K.chunk_layout(nl.first_n, nl.j_p, nk)
-            lay["stat_k"] = np.empty((nk, 5))
+            lay["stat_k"] = np.empty((nk, 6))
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["boff"][-1])
             if lay["f_m3"].shape[0] < m:
@@ -352,6 +352,8 @@ class ClusterDynamics(Calculator):
         else:
             K.reduce_rows(lay["f_m3"], *red, forces, p_kick, h)
         res = {"forces": forces, "energy": None if fin else float(stat[:, 0].sum())}
+        if damping is not None:
+            res["dissipation"] = float(stat[:, 5].sum())     # eV per ASE time, >= 0
         if mode in ("virial", "per_particle"):
             res["virial"] = vir.sum(axis=0)
         if per_particle:

@@ -22,7 +22,7 @@ from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
 from ..parallel import use_threads
 from . import _integrate as I
-from .drives import Drive
+from .drives import Drive, _Layer
 
 #: default time step as a fraction of r0/(c0 + u_max); see :func:`default_timestep`
 TIMESTEP_FACTOR = 0.03
@@ -156,6 +156,11 @@ class DampedVerlet(MolecularDynamics):
         self._fturn = 0
         self._safe = {}
         self.timings = {"forces": 0.0, "integrate": 0.0}
+        #: energy the pair damping has removed, eV (dt times the dissipated power
+        #: ``sum eta |v_i - v_j|^2`` of each step's force pass, half-step velocities)
+        self.damping_loss = 0.0
+        self._dissipation = 0.0
+        self._ledger0 = None
         self._drives()
 
     def _drives(self):
@@ -213,6 +218,7 @@ class DampedVerlet(MolecularDynamics):
                                     kick=None if kick is None else (atoms.arrays["momenta"], kick))
             forces = out["forces"]
             self.potential_energy = out["energy"]
+            self._dissipation = out.get("dissipation", 0.0)
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
                 self._check_stiffness()
         else:
@@ -339,6 +345,7 @@ class DampedVerlet(MolecularDynamics):
         self._check_speed(v2max, k)
         self.timings["integrate"] += time.perf_counter() - t0
         self.forces = self._compute_forces(kick=h)
+        self.damping_loss += self.dt * self._dissipation
         t0 = time.perf_counter()
         for c in cons:
             c.adjust_momenta(atoms, p)
@@ -379,12 +386,63 @@ class DampedVerlet(MolecularDynamics):
             self._refresh_properties()
         return self.get_kinetic_energy() + self.potential_energy
 
+    def _layer_kinetic(self):
+        """Kinetic energy of the driven layers (pistons and tractions), eV."""
+        p = self.atoms.arrays["momenta"]
+        m = self.atoms.get_masses()
+        e = 0.0
+        for d in self._drives():
+            if isinstance(d, _Layer):
+                idx = d.index
+                e += 0.5 * float((p[idx] ** 2).sum(axis=1).dot(1.0 / m[idx]))
+        return e
+
+    def start_ledger(self):
+        """Take the present state as the start of :meth:`energy_ledger` (done at the first step)."""
+        if self.forces is None:
+            self._refresh_properties()
+        self._ledger0 = {"kinetic": self.get_kinetic_energy(), "potential": self.potential_energy,
+                         "layers": self._layer_kinetic(), "work": self._drive_sum("work"),
+                         "dissipated": self._drive_sum("dissipated"), "damping_loss": self.damping_loss}
+
+    def _drive_sum(self, name):
+        return float(sum(getattr(d, name, 0.0) for d in self._drives()))
+
+    def energy_ledger(self):
+        """Where the energy went since the ledger's start (eV).
+
+        ``kinetic``, ``potential`` (pairs and walls) now; ``drive_work`` (work
+        of pistons and tractions on the other particles), ``layer_kinetic``
+        (the change of the driven layers' own kinetic energy), ``damping_loss``
+        (pair damping), ``wall_dissipated`` (sticking walls), all since the
+        start; ``energy_in`` = initial kinetic energy + |drive work|;
+        ``residual`` = change of (kinetic + potential) minus (drive work +
+        layer kinetic - damping loss - wall dissipated): zero for an exact
+        integrator, velocity Verlet's O(dt^2) error otherwise.
+        """
+        if self._ledger0 is None:
+            self.start_ledger()
+        L0 = self._ledger0
+        K, U = self.get_kinetic_energy(), self.potential_energy
+        work = self._drive_sum("work") - L0["work"]
+        layers = self._layer_kinetic() - L0["layers"]
+        loss = self.damping_loss - L0["damping_loss"]
+        diss = self._drive_sum("dissipated") - L0["dissipated"]
+        change = K + U - L0["kinetic"] - L0["potential"]
+        return {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
+                "drive_work": work, "layer_kinetic": layers, "damping_loss": loss, "wall_dissipated": diss,
+                "energy_in": L0["kinetic"] + abs(work),
+                "residual": change - (work + layers - loss - diss)}
+
     # -- checkpoint state (files: clusterdyn.io.checkpoint.save_run / load_run) ----------------
     def get_state(self):
         """Everything a bit-identical restart needs besides the Atoms and their constraints
         (which :func:`clusterdyn.io.checkpoint.save_run` stores with the drives' own state)."""
         nl = getattr(self.calc, "nl", None)
-        st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J}
+        st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J,
+              "damping_loss": self.damping_loss, "dissipation": self._dissipation}
+        if self._ledger0 is not None:
+            st["ledger0"] = dict(self._ledger0)
         if nl is not None and nl.ref_nc is not None:
             st["nl_ref"] = nl.ref_nc.copy()
         if self.forces is not None:
@@ -395,6 +453,10 @@ class DampedVerlet(MolecularDynamics):
     def set_state(self, st):
         self.nsteps = int(st["nsteps"])
         self.dt = float(st["dt"])
+        self.damping_loss = float(st.get("damping_loss", 0.0))
+        self._dissipation = float(st.get("dissipation", 0.0))
+        if "ledger0" in st:
+            self._ledger0 = {k: float(x) for k, x in st["ledger0"].items()}
         nl = getattr(self.calc, "nl", None)
         if nl is not None and "nl_ref" in st:
             nl.build(np.asarray(st["nl_ref"]), self.atoms.cell.array, self.atoms.pbc)
