@@ -415,7 +415,7 @@ class DampedVerlet(MolecularDynamics):
         of pistons and tractions on the other particles), ``layer_kinetic``
         (the change of the driven layers' own kinetic energy), ``damping_loss``
         (pair damping), ``wall_dissipated`` (sticking walls), all since the
-        start; ``energy_in`` = initial kinetic energy + |drive work|;
+        start; ``energy_in`` = initial kinetic energy + the absolute drive work;
         ``residual`` = change of (kinetic + potential) minus (drive work +
         layer kinetic - damping loss - wall dissipated): zero for an exact
         integrator, velocity Verlet's O(dt^2) error otherwise.
