@@ -268,7 +268,7 @@ def _speed(t, x, lo, hi):
 def analyse_impact(setup, run):
     """Plateaus, front and precursor speeds, intensity, free-surface plateau and pullback (ASE units)."""
     prof = run["profiles"]
-    r0, v = setup["r0"], setup["v"]
+    v = setup["v"]
     xi, xr = setup["x_impact"], setup["x_rear"]
     w = prof["x"][1] - prof["x"][0]
     main, pre, plateau = _fronts(prof, xi, xr)
