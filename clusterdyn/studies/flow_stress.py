@@ -10,42 +10,48 @@ A periodic cube of clusters (a polycrystal of Voronoi grains,
    damped dynamics with the velocities zeroed after each, all three cell axes
    rescaled toward zero mean stress), then given ``noise`` of random
    velocity;
-2. compressed in uniaxial strain along ``axis``: the cell and the positions
-   are scaled affinely along that axis, step by step, from strain
-   ``eps_(k-1)`` to ``eps_k`` over ``ramp`` (in r0/c0), for each strain of
-   ``strains`` in turn, each followed by a hold of ``hold`` at fixed shape
-   (pair damping ``J`` on throughout);
+2. compressed in uniaxial strain along ``axis``: every step the cell and the
+   positions are scaled affinely along that axis, at the strain rate
+   ``rate`` (per r0/c0), up to the last strain of ``strains``; then held at
+   fixed shape for ``hold`` (pair damping ``J`` on throughout);
 3. read every ``record_every``: the cell's stress, virial plus kinetic about
    the cell's mean velocity, over the cell's volume
    (:func:`clusterdyn.analysis.stress.cell_stress`).
 
-For each strain it reports the von Mises intensity (CD eq. 4) at the end of
-the ramp, its largest value, and the *relaxed* state: the mean stress over
-the last ``average`` of the hold, its intensity, -sigma_axial and
--sigma_lateral (the mean of the two lateral components).
+It reports the von Mises intensity (CD eq. 4) on the ramp at each strain of
+``strains``, at the end of the ramp, its largest value, and the *relaxed*
+state: the mean stress over the last ``average`` of the hold, its
+intensity, -sigma_axial and -sigma_lateral (the mean of the two lateral
+components).
 
 **Flow stress** (what the study reports): the relaxed von Mises intensity
-at the largest strain of ``strains`` (default 10%).  In uniaxial strain an
-ideally plastic isotropic solid that has yielded carries
-``sigma_axial - sigma_lateral = Y``, so the intensity, which is
-``|sigma_axial - sigma_lateral|`` here, is its yield stress ``Y``; an elastic
-solid instead carries ``(C11 - C12) eps``, which grows with the strain.  The
-intensity at the smaller strains is reported beside it, so a reader sees
-whether it has levelled off.
+at the last strain of ``strains`` (default 15%, reached at 1e-3 per r0/c0).
+In uniaxial strain an ideally plastic isotropic solid that has yielded
+carries ``sigma_axial - sigma_lateral = Y``, so the intensity, which is
+``|sigma_axial - sigma_lateral|`` here, is its yield stress ``Y``; an
+elastic solid instead carries ``(C11 - C12) eps``, which grows with the
+strain.  The intensity on the ramp at the smaller strains is reported
+beside it, so a reader sees whether it has levelled off.  The relaxed value
+depends on the rate (a fast ramp overshoots, breaks boundary pairs and
+relaxes lower), so the rate is part of the definition; the study sweeps it.
 
-The study
----------
+The study (:func:`flow_stress_study`)
+-------------------------------------
 
 Around a default packing (grain diameter, porosity, cutoff rc, grain
 boundaries bonded or repulsive) it varies one factor at a time, plus (with
-``grid``) the grain size x porosity grid, with ``seeds`` polycrystals per
-point (mean and spread), and the [100] single crystal as a reference row.
-It writes ``flow_stress.csv``, ``flow_stress.md``, ``flow_stress.png`` (with
-``flow_stress_points.csv``, the data behind it) and ``flow_stress.json``,
-and prints the packing closest to ``target`` (a yield stress).  Every run
-is kept in ``OUT/runs/<hash of its parameters>/result.json``; a study run
-again on the same folder reads them back, so an interrupted or extended
-study only runs what is missing.
+``grid``) the grain size x porosity grid and the strain rates, with
+``seeds`` polycrystals per point (mean and standard deviation), and the
+[100] single crystal as a reference row.  It writes ``flow_stress.csv``
+(the data behind the figure), ``flow_stress_runs.csv``, ``flow_stress.md``,
+``flow_stress.png`` and ``flow_stress.json``, and prints the packing
+closest to ``target`` (a yield stress); if none reaches it, how far the
+nearest is and which change of which factor lowers the flow stress
+(:func:`advise`), and (``combine``) it runs the packing with every lowering
+change at once.  Every run is kept in
+``OUT/runs/flow-stress-point-<hash of its parameters>/result.json`` (or
+``error.json``); a study run again on the same folder reads them back, so
+an interrupted or extended study only runs what is missing.
 """
 
 import math
@@ -462,7 +468,7 @@ def columns(strains):
     last = _pct(strains[-1])
     cols = [("sweeps", "sweeps", ""), ("grain_size", "grain (r0)", "g"), ("porosity_target", "porosity target", ".2f"),
             ("porosity", "porosity built", ".3f"), ("rc", "rc", "g"), ("boundaries", "boundaries", ""),
-            ("rate", "rate (1/tau)", "g"), ("runs", "runs", "d")]
+            ("rate", "rate (1/tau)", "g"), ("runs", "runs", "d"), ("failed", "failed", "d")]
     cols += [(f"sigma_u_{_pct(e)}", f"s_u {_pct(e)}% ramp", ".2f") for e in strains]
     cols += [("flow_stress", f"flow stress (s_u {last}% relaxed)", ".2f"), ("flow_stress_spread", "+-", ".2f"),
              ("sigma_axial", "-s_xx", ".2f"), ("sigma_lateral", "-s_yy", ".2f"), ("n_clusters", "clusters", ".0f"),
@@ -532,12 +538,16 @@ def _run_jobs(jobs, cache, v, progress, results, run_rows):
     bar = progress_bar(len(jobs), "flow-stress", progress)
     for n, seed, ov in jobs:
         if bar is not None:
-            bar.set_postfix_str(", ".join(f"{k}={ov[k]}" for k in ("sample", "grain_size", "porosity", "rc",
-                                                                      "boundaries", "rate") if k in ov) + f" seed {seed}")
+            keys = ("sample", "grain_size", "porosity", "rc", "boundaries", "rate")
+            bar.set_postfix_str(", ".join(f"{k}={ov[k]}" for k in keys if k in ov) + f" seed {seed}")
         try:
             res, err, wall = run_scene(POINT, ov, progress=False, cache=cache, reuse=v["reuse"])
         except InputError as exc:             # e.g. a porosity the boundary rule cannot reach at this grain size
             res, err, wall = None, f"InputError: {exc}", 0.0
+            folder = run_folder(cache, POINT, ov)     # kept like a failed run, so a resumed study skips it
+            folder.mkdir(parents=True, exist_ok=True)
+            write_json(folder / "error.json", {"params": POINT.display(POINT.parse(ov)), "error": err,
+                                               "wall_time_s": wall})
         results.setdefault(n, []).append(res if res is not None else err)
         rr = {"point": n, "seed": seed, "folder": str(run_folder(cache, POINT, ov)), "wall_s": wall, "error": err,
               **{k: ov.get(k) for k in ("sample", "grain_size", "porosity", "rc", "boundaries", "rate")}}
@@ -652,14 +662,15 @@ def _plot(path, rows, single, v, results):
     for ax, f, g, gl in ((axs[0, 0], "grain_size", "porosity_target", "porosity"),
                          (axs[0, 1], "porosity_target", "grain_size", "grain")):
         for val in sorted({r[g] for r in at_rate if r[g] is not None}):
-            line = sorted((r for r in at_rate if r[g] == val and at_default_rc_boundaries(r) and np.isfinite(r["flow_stress"])),
-                          key=lambda r: r[f])
+            line = sorted((r for r in at_rate if r[g] == val and at_default_rc_boundaries(r)
+                           and np.isfinite(r["flow_stress"])), key=lambda r: r[f])
             if len(line) < 1:
                 continue
             dflt = val == (v["porosity"] if g == "porosity_target" else v["grain_size"])
             ax.errorbar([r[f] for r in line], [r["flow_stress"] for r in line],
                         yerr=[0 if not np.isfinite(r["flow_stress_spread"]) else r["flow_stress_spread"] for r in line],
-                        fmt="o-", lw=2.2 if dflt else 1.0, capsize=3, label=f"{gl} {val:g}" + (" (default)" if dflt else ""))
+                        fmt="o-", lw=2.2 if dflt else 1.0, capsize=3,
+                        label=f"{gl} {val:g}" + (" (default)" if dflt else ""))
         ax.set_xlabel({"grain_size": "grain diameter (r0)", "porosity_target": "porosity"}[f])
     for ax, f, lab in ((axs[0, 2], "rc", "cutoff rc (r0)"), (axs[1, 0], "boundaries", "grain boundaries"),
                        (axs[1, 1], "rate", "strain rate (per r0/c0)")):
@@ -703,7 +714,7 @@ def _plot(path, rows, single, v, results):
         S = np.array(ser["stress"])
         ax.plot(100 * np.array(ser["strain"]), von_mises(S), lw=1, label=lab)
     ax.axhline(target, color="r", ls="--", lw=1)
-    ax.set_xlabel("uniaxial strain (%)  (the hold is the vertical drop at the end)")
+    ax.set_xlabel("uniaxial strain (%); the drop at the end is the hold")
     ax.set_ylabel("von Mises intensity (GPa)")
     ax.legend(fontsize=7)
     fig.suptitle(f"CD flow stress of {v['material']} packings (cube {v['size']:g} r0, uniaxial strain at "

@@ -70,9 +70,13 @@ def test_plan_one_factor_and_grid():
 def test_resume_and_advice(tmp_path, capsys):
     study = get_study("flow-stress")
     n0 = fs.RUNS[0]
-    res = study(TINY, out=tmp_path, progress=False, quiet=False)
-    assert res["runs_computed"] == 3 == fs.RUNS[0] - n0       # two seeds and the single crystal
+    ov = {**TINY, "porosities": "0.2,0.01"}                    # 1% porosity: out of the boundary rule's reach
+    res = study(ov, out=tmp_path, progress=False, quiet=False)
+    assert res["runs_computed"] == 5 == fs.RUNS[0] - n0       # two seeds at two porosities, the single crystal
     assert res["runs_reused"] == 0
+    unreachable = [r for r in res["rows"] if r["porosity_target"] == 0.01]
+    assert len(unreachable) == 1 and unreachable[0]["runs"] == 0 and unreachable[0]["failed"] == 2
+    assert "target_porosity" in unreachable[0]["error"]
     d = res["default"]
     assert d["runs"] == 2 and np.isfinite(d["flow_stress_spread"])
     assert 0.15 < d["porosity"] < 0.25
@@ -84,12 +88,12 @@ def test_resume_and_advice(tmp_path, capsys):
         assert (tmp_path / f).stat().st_size > 100
     # the same folder again: every run is read back, nothing is computed
     n1 = fs.RUNS[0]
-    again = study(TINY, out=tmp_path, progress=False)
-    assert again["runs_computed"] == 0 and fs.RUNS[0] == n1 and again["runs_reused"] == 3
+    again = study(ov, out=tmp_path, progress=False)
+    assert again["runs_computed"] == 0 and fs.RUNS[0] == n1 and again["runs_reused"] == 5
     assert again["default"]["flow_stress"] == d["flow_stress"]
-    # one more seed: only that run is computed
-    more = study({**TINY, "seeds": "3"}, out=tmp_path, progress=False)
-    assert more["runs_computed"] == 1 and more["default"]["runs"] == 3
+    # one more seed: only its two runs are computed
+    more = study({**ov, "seeds": "3"}, out=tmp_path, progress=False)
+    assert more["runs_computed"] == 2 and more["default"]["runs"] == 3
 
 
 def test_advice_when_no_packing_reaches_the_target():
@@ -125,3 +129,13 @@ def test_combined_point_when_the_target_is_out_of_reach(tmp_path):
         assert not combined
     assert res["runs_computed"] == 5 + len(combined)
     assert len(combined) == 1
+
+
+def test_relax_sample_rescales_only_periodic_axes():
+    from clusterdyn.build import Plate, polycrystal
+    from clusterdyn.scenes.plate_impact import relax_sample
+    r0 = 10 * units.um
+    atoms = polycrystal("Al", r0, Plate(8 * r0, 8 * r0), grain_size=4 * r0, seed=1, pbc=(False, True, True))
+    atoms.calc = ClusterDynamics()
+    with pytest.raises(InputError, match="axes="):
+        relax_sample(atoms, cycles=1, steps=1, axes=(0, 1, 2))
