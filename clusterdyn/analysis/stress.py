@@ -145,3 +145,20 @@ def local_stress(atoms, radius, virials=None, centers=None):
     kin = np.stack([A @ (m * v[:, p] * v[:, q_]) - M * vbar[:, p] * vbar[:, q_] for p, q_ in VOIGT], axis=1)
     total = A @ W - kin
     return total / (4.0 / 3.0 * math.pi * radius ** 3)
+
+
+def cell_stress(atoms, virials=None):
+    """Stress of a whole periodic cell, virial + kinetic (CD eq. 3 over the cell), Voigt (6,).
+
+    The kinetic part is taken about the cell's mean velocity and the volume
+    is the cell's, so this is the mean stress a material-point test reads
+    (eV/Angstrom^3, tension positive).  ``virials``: the potential part,
+    (N, 6) eV (default :func:`particle_virials`).
+    """
+    if atoms.cell.rank != 3:
+        raise InputError("atoms.cell", atoms.cell, "a 3-D cell (the stress is per cell volume)")
+    W = particle_virials(atoms) if virials is None else np.asarray(virials, float)
+    m = atoms.get_masses()
+    v = atoms.get_velocities()
+    vbar = (m[:, None] * v).sum(axis=0) / m.sum()
+    return (W.sum(axis=0) + kinetic_virials(m, v, vbar).sum(axis=0)) / atoms.get_volume()

@@ -82,15 +82,31 @@ def make_plate(sample, material, r0, thickness, width, grain_size=8.0, seed=1, d
     raise InputError("sample", sample, "single or polycrystal")
 
 
-def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False):
+def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes=None):
     """Quench a sample (in place): damped dynamics, velocities zeroed every ``steps``.
 
-    With ``lateral`` the periodic cross-section (y, z) is rescaled after each
-    cycle by ``1 - s_yy/(1.5 K0)`` (``s_zz`` for z), which drives the mean
-    lateral stress of a plate toward zero.  Returns a dict with the final
-    mean stress (Voigt, eV/A^3), the smallest pair distance (r0) and the
-    number of steps.
+    After each cycle the cell axes in ``axes`` are rescaled by
+    ``1 - s_aa/(1.5 K0)`` (affinely, atoms with them), which drives the mean
+    stress along them toward zero.  ``axes`` defaults to the cross-section
+    (y, z) of a plate when ``lateral`` and to none otherwise; a periodic cube
+    (a material-point sample) passes ``axes=(0, 1, 2)``.  Only periodic axes
+    may be rescaled.  The mean stress is the summed virials over the
+    sample's volume: the cell length along periodic axes, the extent of the
+    positions plus ``r0/sqrt(2)`` along free ones.
+
+    Returns
+    -------
+    dict
+        ``stress``: final mean stress (Voigt, eV/A^3); ``min_r_over_r0``:
+        the smallest pair distance (r0); ``steps``: damped steps run.
     """
+    if axes is None:
+        axes = (1, 2) if lateral else ()
+    axes = tuple(int(a) for a in axes)
+    pbc = np.asarray(atoms.pbc, bool)
+    for a in axes:
+        if a not in (0, 1, 2) or not pbc[a]:
+            raise InputError("axes", axes, f"periodic cell axes (pbc = {pbc.tolist()})")
     calc = atoms.calc
     calc.setup(atoms)
     pot = calc.potentials[0]
@@ -100,13 +116,12 @@ def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False):
     for _ in range(cycles):
         dyn.run(steps)
         atoms.set_momenta(np.zeros((len(atoms), 3)))
-        x = atoms.positions[:, 0]
-        vol = (np.ptp(x) + pot.r0 / SQRT2) * atoms.cell[1, 1] * atoms.cell[2, 2]
-        s = particle_virials(atoms).sum(axis=0) / vol
-        if lateral:
+        ext = [atoms.cell[d, d] if pbc[d] else np.ptp(atoms.positions[:, d]) + pot.r0 / SQRT2 for d in range(3)]
+        s = particle_virials(atoms).sum(axis=0) / float(np.prod(ext))
+        if axes:
             f = np.ones(3)
-            f[1] = 1.0 - s[1] / (1.5 * K0)       # tension (s > 0): shrink the cross-section
-            f[2] = 1.0 - s[2] / (1.5 * K0)
+            for a in axes:
+                f[a] = 1.0 - s[a] / (1.5 * K0)     # tension (s > 0): shrink the axis
             atoms.set_cell(atoms.cell.array * f[:, None], scale_atoms=True)
         dyn.forces = None                     # positions or momenta changed outside the step
     return {"stress": s, "min_r_over_r0": calc.last_stats["min_r_over_r0"], "steps": cycles * steps}

@@ -18,6 +18,9 @@ stability      the measured time-step limit (bounded energy error) for u = 0-8 k
 mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, hcp,
                sc and random packings) and the Cluster Dynamics contrast
 mca-degrading  a load / unload / reload cycle of a degrading MCA material
+flow-stress    the flow stress of a CD polycrystal (uniaxial-strain material-point
+               test) against grain size, porosity, rc and boundary cohesion, and the
+               packing closest to a target yield stress
 =============  =================================================================
 """
 
@@ -37,6 +40,8 @@ STUDIES = {
                        "fcc, hcp, sc and random packings, and the Cluster Dynamics contrast"),
     "mca-degrading": ("mca:degrading_study:DEGRADING_PARAMS", "a load / unload / reload cycle of a degrading "
                       "MCA material"),
+    "flow-stress": ("flow_stress:flow_stress_study:PARAMS", "flow stress of a CD polycrystal (material-point "
+                    "test) against grain size, porosity, rc and boundary cohesion; the packing closest to a target"),
 }
 
 
