@@ -309,3 +309,39 @@ def pareto_front(cost, err):
             best = err[i]
     return front
 
+
+
+class StudyPoint:
+    """A study's unit of work that is one function call rather than a scene's dynamics run.
+
+    It declares its parameters like a scene (``params``: list of Param) and is
+    cached by :func:`run_scene` like one: ``parse``, ``defaults``, ``display``
+    are the scene lifecycle's; ``run(overrides, out=None, progress=False)``
+    calls ``runner(values, out, progress)``, which returns a SceneResult.
+    """
+
+    def __init__(self, name, description, params, runner):
+        from ..scenes.lifecycle import SceneDef
+        self.name, self.description, self.params, self.runner = name, description, list(params), runner
+        self._def = SceneDef()
+        self._def.name, self._def.params = name, self.params
+
+    def defaults(self):
+        return self._def.defaults()
+
+    def parse(self, overrides):
+        return self._def.parse(overrides)
+
+    def display(self, vals):
+        return self._def.display(vals)
+
+    def run(self, overrides=None, out=None, progress=False):
+        vals = self.parse(overrides)
+        t0 = time.perf_counter()
+        res = self.runner(vals, out=Path(out) if out else None, progress=progress)
+        if res.wall_time_s is None:
+            res.wall_time_s = time.perf_counter() - t0
+        res.params = self.display(vals)
+        if out is not None:
+            res.files.append(res.write(out))
+        return res

@@ -67,12 +67,12 @@ from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material
 from ..md import DampedVerlet
-from ..scenes.base import Param, Quantity, Scene, SceneResult
+from ..scenes.base import Param, Quantity, SceneResult
 from ..scenes.common import matplotlib_agg, thermal_noise
 from ..scenes.plate_impact import relax_sample
 from ..scenes.shock import CD_MATERIALS
 from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
-                     run_folder, run_scene, write_csv, write_json)
+                     StudyPoint, run_folder, run_scene, write_csv, write_json)
 
 BOUNDARIES = ("bonded", "repulsive")
 
@@ -326,7 +326,7 @@ def _point_runner(v, out=None, progress=False):
 
 
 #: the cached unit of the study (not a registered scene: ``clusterdyn run`` does not list it)
-POINT = Scene("flow-stress-point", "one uniaxial-strain material-point test", POINT_PARAMS, _point_runner)
+POINT = StudyPoint("flow-stress-point", "one uniaxial-strain material-point test", POINT_PARAMS, _point_runner)
 
 
 # --------------------------------------------------------------------------- the study
