@@ -1,4 +1,4 @@
-"""Polycrystals of clusters (CD, physics.md 1.7): Voronoi grains of randomly oriented fcc packings.
+"""Polycrystals of clusters (CD, docs/theory.md 1.7): Voronoi grains of randomly oriented fcc packings.
 
 Construction, step by step (every step is deterministic given ``seed``):
 

@@ -2,7 +2,7 @@
 
 The contact areas and volumes come from the Voronoi tessellation of the
 automaton centres (``scipy.spatial.Voronoi``; for equal sizes it is the
-radical tessellation), computed once at set-up (physics.md 2.1, 2.5):
+radical tessellation), computed once at set-up (docs/theory.md 2.1, 2.5):
 
 * a *pair* is two automata whose Voronoi cells share a face; ``S_ij`` is the
   face area (3D) or edge length times unit thickness (2D); ``q_ij`` is the

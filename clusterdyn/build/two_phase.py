@@ -1,4 +1,4 @@
-"""Two-phase samples: spherical inclusions of one material in a matrix of another (physics.md 1.6).
+"""Two-phase samples: spherical inclusions of one material in a matrix of another (docs/theory.md 1.6).
 
 The CD paper's two cases (r0 = 4 um for both phases unless a study shows
 better):
@@ -9,7 +9,7 @@ better):
   ``two_phase("B4C", "h-BN", 0.25, 56 * units.um)``
 
 Unlike pairs need nothing here: the calculator builds the unlike-pair law
-(two half-bonds in series, physics.md 1.2) and the dynamics the per-pair
+(two half-bonds in series, docs/theory.md 1.2) and the dynamics the per-pair
 damping for any pair of material ids.
 """
 

@@ -1,4 +1,4 @@
-"""Cold curves P_x(delta), eps_x(delta) of a material (physics.md 1.1).
+"""Cold curves P_x(delta), eps_x(delta) of a material (docs/theory.md 1.1).
 
 ``delta = rho/rho0`` is the compression.  Both curves satisfy
 ``d eps_x / d delta = P_x / (rho0 delta^2)`` exactly, with ``eps_x(1) = 0``,

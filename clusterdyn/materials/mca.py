@@ -1,4 +1,4 @@
-"""MCA material library (physics.md 2.5): alumina, concrete, aluminium 6061, copper.
+"""MCA material library (docs/theory.md 2.5): alumina, concrete, aluminium 6061, copper.
 
 Registered through :func:`clusterdyn.materials.register_material`, so
 ``get_material("alumina")`` works without importing :mod:`clusterdyn.mca`.
@@ -81,7 +81,7 @@ def _alumina():
         source=("Dense alumina (99.5% Al2O3), textbook values: M. F. Ashby, D. R. H. Jones, "
                 "Engineering Materials 2, 4th ed. (2013), ch. 15-17; rho 3.9 g/cm3, E 370 GPa, "
                 "nu 0.22, tensile (modulus of rupture) 0.3 GPa, compressive 2.5 GPa; "
-                "values as fixed in physics.md 2.5"))
+                "values as fixed in docs/theory.md 2.5"))
 
 
 def _concrete():
@@ -90,7 +90,7 @@ def _concrete():
         mu=0.5, sigma_d=0.021 * units.GPa, D_c=0.8,
         source=("Normal-strength concrete, textbook values: A. M. Neville, Properties of Concrete, "
                 "5th ed. (2011); rho 2.4 g/cm3, E 30 GPa, nu 0.2, tensile 3 MPa, compressive 30 MPa; "
-                "degradation onset sigma_d = 0.7 sigma_c (our choice); physics.md 2.5"))
+                "degradation onset sigma_d = 0.7 sigma_c (our choice); docs/theory.md 2.5"))
 
 
 def _al6061():
@@ -99,7 +99,7 @@ def _al6061():
         hardening=None, mu=0.3,
         source=("Aluminium alloy 6061-T6: ASM Handbook vol. 2 (1990), Properties of wrought "
                 "aluminum alloys; rho 2.7 g/cm3, E 69 GPa, nu 0.33, yield 0.28 GPa "
-                "(perfectly plastic unless a hardening curve is given); physics.md 2.5"))
+                "(perfectly plastic unless a hardening curve is given); docs/theory.md 2.5"))
 
 
 def _copper():
@@ -107,7 +107,7 @@ def _copper():
         "copper", 8.96, 120.0, 0.34, sigma_y_GPa=0.07, response="elastic-plastic",
         hardening=None, mu=0.3,
         source=("Annealed OFHC copper: ASM Handbook vol. 2 (1990), Properties of pure metals; "
-                "rho 8.96 g/cm3, E 120 GPa, nu 0.34, yield 0.07 GPa; physics.md 2.5"))
+                "rho 8.96 g/cm3, E 120 GPa, nu 0.34, yield 0.07 GPa; docs/theory.md 2.5"))
 
 
 MCA_MATERIALS = {"alumina": _alumina, "concrete": _concrete, "Al6061": _al6061, "copper": _copper}

@@ -1,4 +1,4 @@
-"""Cluster pair potentials from a cold curve (CD eq. 1-2, physics.md 1.2).
+"""Cluster pair potentials from a cold curve (CD eq. 1-2, docs/theory.md 1.2).
 
 For clusters of equilibrium distance ``r0`` in fcc close packing (12
 neighbours, volume ``r0^3/sqrt(2)`` each, mass ``M = rho0 r0^3/sqrt(2)``) and
@@ -113,7 +113,7 @@ class ClusterPotential:
 
 
 class MixedPairPotential:
-    """Bond between clusters of two materials: two half-bonds in series (physics.md 1.2).
+    """Bond between clusters of two materials: two half-bonds in series (docs/theory.md 1.2).
 
     ``r0_AB = (r0_A + r0_B)/2``; for a bond of length r the halves ``x_A + x_B = r``
     satisfy ``f_A(2 x_A) = f_B(2 x_B)`` (same force); then

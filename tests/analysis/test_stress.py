@@ -60,7 +60,7 @@ def test_uniaxial_strain_von_mises_is_c11_minus_c12():
     from clusterdyn.potentials import ClusterPotential
     kk = float(ClusterPotential(k, R0).stiffness())
     a = math.sqrt(2) * R0
-    # nearest-neighbour central forces: C11 = 2k/a, C12 = k/a (physics.md 1.5)
+    # nearest-neighbour central forces: C11 = 2k/a, C12 = k/a (docs/theory.md 1.5)
     assert s[0] == pytest.approx(2 * kk / a * eps, rel=0.02)
     assert s[1] == pytest.approx(kk / a * eps, rel=0.02)
     assert von_mises(s) == pytest.approx(kk / a * abs(eps), rel=0.03)

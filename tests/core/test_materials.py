@@ -1,4 +1,4 @@
-"""Cold curves and the CD pair potential against the paper's Table 1 (physics.md 1.1-1.2)."""
+"""Cold curves and the CD pair potential against the paper's Table 1 (docs/theory.md 1.1-1.2)."""
 
 import numpy as np
 import pytest

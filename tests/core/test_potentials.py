@@ -1,4 +1,4 @@
-"""Unlike-pair mixing, cutoff rules and the kernel tables (physics.md 1.2)."""
+"""Unlike-pair mixing, cutoff rules and the kernel tables (docs/theory.md 1.2)."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """Stiff and extreme cases: what runs, what stops, and that a stop names step, particles and quantity.
 
-physics.md 3: the stable step scales as r0/c_max; a run past the limit, or
+docs/theory.md 3: the stable step scales as r0/c_max; a run past the limit, or
 pushed to compressions beyond the potential's tabulated range, stops with
 InstabilityError.  The measured limits are in ``clusterdyn study stability``.
 """
@@ -213,7 +213,7 @@ def test_head_on_collision_at_10kms_conserves_energy():
 
 
 def test_cutoff_crossing_costs_at_most_f_rc_v_dt():
-    # crossing rc the force jumps by f(rc) (no taper, physics.md 1.2): velocity Verlet then errs by
+    # crossing rc the force jumps by f(rc) (no taper, docs/theory.md 1.2): velocity Verlet then errs by
     # at most |f(rc)| v dt / 2 per crossing, so the error falls with the step
     for dt_factor in (1e-3, 3e-4):
         a, dyn = collide(dt_factor, r_start=1.3)
