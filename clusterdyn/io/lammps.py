@@ -258,6 +258,30 @@ def initial_bond_pairs(atoms, calc):
     return np.stack([uniq // n, uniq % n], axis=1)
 
 
+def type_masses(atoms, types):
+    """One mass per type (material id), amu; InputError when a material's particles differ in mass."""
+    masses = atoms.get_masses()
+    ntypes = int(types.max()) + 1 if len(atoms) else 1
+    mass_t = np.zeros(ntypes)
+    for t in range(ntypes):
+        m = masses[types == t]
+        if len(m) == 0:
+            mass_t[t] = 1.0
+            continue
+        if np.ptp(m) > 1e-12 * m.max():
+            raise InputError("masses", f"{m.min()}..{m.max()} for material {t}",
+                             "one mass per material (LAMMPS has per-type masses)")
+        mass_t[t] = m[0]
+    return mass_t
+
+
+def _check_cell(atoms):
+    cell = atoms.cell.array
+    for d in range(3):
+        if atoms.pbc[d] and (abs(cell[d, d]) <= 0 or np.abs(cell[d] - cell[d, d] * np.eye(3)[d]).max() > 0):
+            raise InputError("cell", cell.tolist(), "an orthorhombic cell along periodic axes")
+
+
 def write_data(atoms, types, path, margin, bonds=None):
     """LAMMPS data file (metal units) of ``atoms``; returns the box (lo, hi) and the masses per type.
 
@@ -268,24 +292,13 @@ def write_data(atoms, types, path, margin, bonds=None):
     pos = atoms.get_positions().copy()
     cell = atoms.cell.array
     pbc = atoms.pbc
-    masses = atoms.get_masses()
-    ntypes = int(types.max()) + 1 if n else 1
-    mass_t = np.zeros(ntypes)
-    for t in range(ntypes):
-        m = masses[types == t]
-        if len(m) == 0:
-            mass_t[t] = 1.0
-            continue
-        if np.ptp(m) > 1e-12 * m.max():
-            raise InputError("masses", f"{m.min()}..{m.max()} for material {t}",
-                             "one mass per material (LAMMPS atom_style atomic has per-type masses)")
-        mass_t[t] = m[0]
+    mass_t = type_masses(atoms, types)
+    ntypes = len(mass_t)
+    _check_cell(atoms)
     lo = np.zeros(3)
     hi = np.zeros(3)
     for d in range(3):
         if pbc[d]:
-            if abs(cell[d, d]) <= 0 or np.abs(cell[d] - cell[d, d] * np.eye(3)[d]).max() > 0:
-                raise InputError("cell", cell.tolist(), "an orthorhombic cell along periodic axes")
             L = cell[d, d]
             pos[:, d] -= np.floor(pos[:, d] / L) * L
             pos[pos[:, d] >= L, d] -= L
@@ -579,6 +592,34 @@ class ExportInfo:
     groups: dict = field(default_factory=dict)
 
 
+def check_deck(atoms, calc, dyn):
+    """Everything :func:`export_lammps` refuses, checked without writing anything.
+
+    Refused (:class:`~clusterdyn.errors.InputError`, one line): a calculator
+    other than ClusterDynamics, dynamics other than clusterdyn's
+    :class:`~clusterdyn.md.DampedVerlet` or ASE's velocity Verlet (both are
+    velocity Verlet, which ``fix nve`` is), a drive without a LAMMPS form
+    (:func:`drive_lines`), one-sided set-up bonds (:func:`initial_bond_pairs`),
+    masses that differ within a material, a non-orthorhombic periodic cell.
+    Returns ``(drive commands, drive meta, held groups, bonds or None)``.
+    """
+    from ase.md.verlet import VelocityVerlet
+
+    from ..calculators.cluster import ClusterDynamics
+    from ..md.damped import DampedVerlet
+    if not isinstance(calc, ClusterDynamics):
+        raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
+    if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
+        raise InputError("dyn", type(dyn).__name__, "DampedVerlet or ASE's VelocityVerlet (LAMMPS' fix nve)")
+    calc.setup(atoms)
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    drive_cmds, groups, held = drive_lines(atoms, dt)
+    bonds = initial_bond_pairs(atoms, calc) if calc.parameters.attraction == "initial" else None
+    type_masses(atoms, calc._check_types(atoms))
+    _check_cell(atoms)
+    return drive_cmds, groups, held, bonds
+
+
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
                   seed=12345, skin=None, extra=None):
     """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
@@ -604,14 +645,9 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
 
     Returns the folder (a :class:`pathlib.Path`).
     """
-    from ..calculators.cluster import ClusterDynamics
-    if not isinstance(calc, ClusterDynamics):
-        raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
-    calc.setup(atoms)
+    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn)   # refusals before any file is written
     dt = float(dyn.dt) if dyn is not None else 0.0
-    drive_cmds, groups, held = drive_lines(atoms, dt)    # refusals come before any file is written
-    initial = calc.parameters.attraction == "initial"
-    bonds = initial_bond_pairs(atoms, calc) if initial else None
+    initial = bonds is not None
     if initial:
         n_points = aligned_points(calc, n_points)
     folder = Path(folder)
