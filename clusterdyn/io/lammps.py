@@ -3,7 +3,10 @@
 :func:`export_lammps` writes a folder that LAMMPS runs as it is:
 
 - ``data.cd``: the particles (``atom_style atomic``; type = material id + 1,
-  one mass per type), velocities, box;
+  one mass per type), velocities, box; with ``attraction="initial"``
+  ``atom_style bond`` and the set-up bonds (:func:`initial_bond_pairs`,
+  :func:`pair_lines`: bond-marked special pairs, the law and its remainder
+  as two table sub-styles);
 - ``cd.table``: ``pair_style table`` entries for every pair of materials,
   sampled from clusterdyn's own cubic-Hermite tables (shifted energy, force)
   on LAMMPS' own grid: ``N`` points uniform in r^2 (``RSQ``) from the table's
@@ -28,6 +31,9 @@
   (velocity Verlet; the damping then sees half-step velocities, as in
   :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
 - ``cd.json``: what the export knew (units, steps, groups, scene parameters).
+
+What cannot be written faithfully is refused in one line before any file
+(:func:`check_deck`).
 
 Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
 eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
