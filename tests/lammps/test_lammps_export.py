@@ -219,7 +219,8 @@ def test_initial_two_material_deck(tmp_path):
     mat = a.arrays["material"]
     assert "2 atom types" in data and "Atoms # bond" in data
     masses = re.search(r"Masses\n\n1 (\S+)\n2 (\S+)\n", data)
-    assert float(masses.group(1)) == a.get_masses()[mat == 0][0] and float(masses.group(2)) == a.get_masses()[mat == 1][0]
+    m = a.get_masses()
+    assert float(masses.group(1)) == m[mat == 0][0] and float(masses.group(2)) == m[mat == 1][0]
     body = data.split("Atoms # bond\n\n")[1].split("\n\nVelocities")[0].split("\n")
     assert [int(ln.split()[2]) for ln in body] == (mat + 1).tolist()
     # bonds: every pair listed in bonds0, once, as ids = rows + 1
@@ -237,7 +238,8 @@ def test_initial_two_material_deck(tmp_path):
                  "pair_modify     pair table 1 special lj 1.0 1.0 1.0",
                  "pair_modify     pair table 2 special lj 0.0 1.0 1.0",
                  "pair_modify     pair dpd/ext/tstat 2 special lj 0.0 1.0 1.0",
-                 "pair_modify     pair dpd/ext/tstat 3 special lj 0.0 1.0 1.0", "pair_coeff      1 2 table 2 cd.table CDR_1_2",
+                 "pair_modify     pair dpd/ext/tstat 3 special lj 0.0 1.0 1.0",
+                 "pair_coeff      1 2 table 2 cd.table CDR_1_2",
                  f"pair_style      hybrid/overlay table linear {N} table linear {N} dpd/ext/tstat"):
         assert line in text, line
     assert "lost/bond ignore" in text
@@ -303,7 +305,8 @@ def test_cli_shock_settings_in_the_deck(tmp_path):
     csv = tmp_path / "u.csv"
     csv.write_text("t_ns,u_km_s\n0,0\n1,2\n2,1.5\n")
     out = tmp_path / "deck"
-    assert cli_main(["export", "lammps", "shock", "--set", "size=10x3x3", "--set", "axis=z", "--set", f"u_history={csv}",
+    assert cli_main(["export", "lammps", "shock", "--set", "size=10x3x3", "--set", "axis=z",
+                     "--set", f"u_history={csv}",
                      "--set", "u=2km/s", "--set", "J=40", "--set", "rc=1.2", "--set", "dt_factor=0.02",
                      "--set", "frames=7", "--set", "dt_retries=0", "--set", "checkpoint_every=0",
                      "--set", "h5md=false", "--quiet", "--out", str(out)]) == 0
