@@ -173,9 +173,10 @@ def cmd_export(args):
     if args.format != "lammps":
         raise InputError("format", args.format, "lammps")
     from .scenes.export import export_scene
-    folder = export_scene(args.scene, _parse_sets(args.set), args.out)
+    folders = export_scene(args.scene, _parse_sets(args.set), args.out)
     if not args.quiet:
-        print(f"wrote LAMMPS deck to {folder}")
+        for folder in folders:
+            print(f"wrote LAMMPS deck to {folder}")
     return 0
 
 

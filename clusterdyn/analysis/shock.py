@@ -467,15 +467,18 @@ def mixture_D(u, phases, closure="equal_u"):
     return float(mix(P)[1])
 
 
-def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo):
-    """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames."""
-    tracker = ShockTracker(rho0, u, slab, axis=0, lo=x_lo, hi=x_lo + length + slab)
+def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo, axis=0, rest_volume=None):
+    """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames.
+
+    ``axis``: the shock direction (0, 1, 2); ``rest_volume``: (N,) rest volume
+    of each cluster for a two-phase sample (as the live run's tracker)."""
+    tracker = ShockTracker(rho0, u, slab, axis=axis, lo=x_lo, hi=x_lo + length + slab, rest_volume=rest_volume)
     dt_ps = None
     meta = json.loads((Path(run.folder) / META_FILE).read_text())
     dt_ps = meta["dt_ps"]
     for fr in run.frames:
         a, vir = frame_atoms(template, fr)
         t = fr["step"] * dt_ps * units.PS
-        pist = a.positions[piston_mask, 0].max()
+        pist = a.positions[piston_mask, axis].max()
         tracker.add(t, a, vir, pist, exclude=piston_mask)
     return tracker, tracker.result()

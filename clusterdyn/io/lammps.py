@@ -3,7 +3,10 @@
 :func:`export_lammps` writes a folder that LAMMPS runs as it is:
 
 - ``data.cd``: the particles (``atom_style atomic``; type = material id + 1,
-  one mass per type), velocities, box;
+  one mass per type), velocities, box; with ``attraction="initial"``
+  ``atom_style bond`` and the set-up bonds (:func:`initial_bond_pairs`,
+  :func:`pair_lines`: bond-marked special pairs, the law and its remainder
+  as two table sub-styles);
 - ``cd.table``: ``pair_style table`` entries for every pair of materials,
   sampled from clusterdyn's own cubic-Hermite tables (shifted energy, force)
   on LAMMPS' own grid: ``N`` points uniform in r^2 (``RSQ``) from the table's
@@ -28,6 +31,9 @@
   (velocity Verlet; the damping then sees half-step velocities, as in
   :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
 - ``cd.json``: what the export knew (units, steps, groups, scene parameters).
+
+What cannot be written faithfully is refused in one line before any file
+(:func:`check_deck`).
 
 Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
 eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
@@ -74,8 +80,10 @@ def table_grid(r_lo, r_hi, n):
     return np.sqrt(r_lo * r_lo + (r_hi * r_hi - r_lo * r_lo) * i / (n - 1))
 
 
-def table_entry_name(a, b):
-    return f"CD_{a + 1}_{b + 1}"
+def table_entry_name(a, b, kind=""):
+    """Entry name of material pair (a, b) in cd.table: ``CD_a_b`` (the law) or ``CDR_a_b`` (kind "R",
+    the remainder that turns the law into its repulsive-only form, attraction="initial")."""
+    return f"CD{kind}_{a + 1}_{b + 1}"
 
 
 def _sample(table, r):
@@ -85,28 +93,64 @@ def _sample(table, r):
     return e, f
 
 
-def write_tables(calc, path, n_points=DEFAULT_TABLE_POINTS):
-    """Write every material pair's table to ``path``; returns [(a, b, entry, r_lo, r_hi)]."""
+def _sample_remainder(table, r):
+    """(E, f) of the remainder R = (repulsive-only law) - (law) of an unbonded pair (attraction="initial").
+
+    clusterdyn's unbonded pair: below r0_ab the law with the energy ``E(r) + E(rc)``
+    (the table's shifted E plus the shift, i.e. ``E(r) - E(r0)``), nothing from
+    r0_ab on.  So R is the constant ``E(rc)`` with zero force below r0_ab and
+    minus the law from r0_ab to the cutoff (the same test ``r^2 < r0_ab^2`` as
+    the kernels)."""
+    e, f = _sample(table, r)
+    inside = r * r < table.law.r0 ** 2
+    return np.where(inside, table.e_shift, -e), np.where(inside, 0.0, -f)
+
+
+def aligned_points(calc, n_points):
+    """The smallest N >= n_points with (N - 1) a multiple of the calculator's table bins.
+
+    LAMMPS' RSQ grid of N points from the table's r_min to its cutoff then
+    contains every node of clusterdyn's table, r0_ab^2 among them, so the
+    remainder table of attraction="initial" (zero force below r0_ab) steps at a node."""
+    nb = int(calc.tables[0][0].n_bins)
+    m = max(1, -(-(int(n_points) - 1) // nb))
+    return m * nb + 1
+
+
+def write_tables(calc, path, n_points=DEFAULT_TABLE_POINTS, remainder=False):
+    """Write every material pair's table to ``path``; returns [(a, b, entry, r_lo, r_hi)].
+
+    ``remainder=True`` (attraction="initial") also writes the ``CDR_a_b``
+    entries (:func:`_sample_remainder`) on the same grid, so that LAMMPS' lookups
+    of the two tables at one distance share the bin and the fraction: from
+    r0_ab to the cutoff their sum is zero to rounding.
+    """
     nt = len(calc.potentials)
     out = []
+    kinds = ("", "R") if remainder else ("",)
     with open(path, "w") as fh:
         fh.write("# clusterdyn Cluster Dynamics pair tables (CD eq. 1-2), units metal: "
                  "r Angstrom, E eV (shifted by E(cutoff)), F eV/Angstrom (positive = repulsive)\n")
         fh.write("# sampled from clusterdyn's cubic-Hermite tables on LAMMPS' RSQ grid: use "
-                 f"'pair_style table linear {n_points}'\n\n")
-        for a in range(nt):
-            for b in range(a, nt):
-                t = calc.tables[a][b]
-                r_lo, r_hi = float(t.r_min), float(t.cutoff)
-                r = table_grid(r_lo, r_hi, n_points)
-                e, f = _sample(t, r)
-                name = table_entry_name(a, b)
-                fh.write(f"{name}\nN {n_points} RSQ {r_lo!r} {r_hi!r}\n\n")
-                rl, el, fl = r.tolist(), e.tolist(), f.tolist()
-                lines = [f"{i + 1} {rl[i]!r} {el[i]!r} {fl[i]!r}" for i in range(n_points)]
-                fh.write("\n".join(lines))
-                fh.write("\n\n")
-                out.append((a, b, name, r_lo, r_hi))
+                 f"'pair_style table linear {n_points}'\n")
+        if remainder:
+            fh.write("# CDR_a_b: the repulsive-only law minus the law (E(cutoff) and no force below r0_ab, "
+                     "minus the law from r0_ab to the cutoff), for pairs not bonded at set-up\n")
+        fh.write("\n")
+        for kind in kinds:
+            for a in range(nt):
+                for b in range(a, nt):
+                    t = calc.tables[a][b]
+                    r_lo, r_hi = float(t.r_min), float(t.cutoff)
+                    r = table_grid(r_lo, r_hi, n_points)
+                    e, f = _sample_remainder(t, r) if kind == "R" else _sample(t, r)
+                    name = table_entry_name(a, b, kind)
+                    fh.write(f"{name}\nN {n_points} RSQ {r_lo!r} {r_hi!r}\n\n")
+                    rl, el, fl = r.tolist(), e.tolist(), f.tolist()
+                    lines = [f"{i + 1} {rl[i]!r} {el[i]!r} {fl[i]!r}" for i in range(n_points)]
+                    fh.write("\n".join(lines))
+                    fh.write("\n\n")
+                    out.append((a, b, name, r_lo, r_hi))
     return out
 
 
@@ -178,14 +222,52 @@ def _group_lines(name, ids, per_line=200):
     return lines
 
 
-def write_data(atoms, types, path, margin):
-    """LAMMPS data file (atom_style atomic, metal units) of ``atoms``; returns the box (lo, hi)."""
+def initial_bond_pairs(atoms, calc):
+    """The set-up bonds of ``attraction="initial"`` as LAMMPS bonds: (nb, 2) rows i < j, sorted.
+
+    Read from ``atoms.arrays['bonds0']`` (partner ids, :func:`clusterdyn.calculators.mark_initial_bonds`)
+    and ``atoms.arrays['id']``; a partner id no particle carries bonds nothing
+    (clusterdyn's kernels never match it either).  Refused in one line: ids
+    that are not unique, a particle bonded to itself, and one-sided bonds (j
+    in i's list but not i in j's: the kernels' answer would then depend on
+    which of the two rows the neighbour list puts first).
+    """
+    _, bonds_nk, ids = calc._bond_args(atoms)
     n = len(atoms)
-    pos = atoms.get_positions().copy()
-    cell = atoms.cell.array
-    pbc = atoms.pbc
+    order = np.argsort(ids, kind="stable")
+    sid = ids[order]
+    if n > 1 and np.any(sid[1:] == sid[:-1]):
+        raise InputError("atoms.arrays['id']", "repeated ids", "one id per particle (the set-up bonds name "
+                         "their partners by id)")
+    width = bonds_nk.shape[1] if bonds_nk.ndim == 2 else 0
+    i = np.repeat(np.arange(n, dtype=np.int64), width)
+    pid = bonds_nk.reshape(-1)
+    keep = pid >= 0
+    i, pid = i[keep], pid[keep]
+    k = np.searchsorted(sid, pid)
+    k = np.minimum(k, max(n - 1, 0))
+    found = sid[k] == pid if n else np.zeros(0, bool)
+    i, j = i[found], order[k[found]]
+    if np.any(i == j):
+        raise InputError("atoms.arrays['bonds0']", f"particle {int(i[i == j][0])} bonded to itself",
+                         "bonds between two particles")
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    key = lo * n + hi
+    uniq, count = np.unique(key, return_counts=True)
+    # each bond listed by both of its particles (duplicates within one list count once per side)
+    pair_side = np.unique(np.stack([key, (i > j).astype(np.int64)], axis=1), axis=0)
+    sides = np.bincount(np.searchsorted(uniq, pair_side[:, 0]), minlength=uniq.size)
+    if np.any(sides != 2):
+        bad = int(np.count_nonzero(sides != 2))
+        raise InputError("atoms.arrays['bonds0']", f"{bad} one-sided bond(s)",
+                         "symmetric set-up bonds, each listed by both particles (mark_initial_bonds)")
+    return np.stack([uniq // n, uniq % n], axis=1)
+
+
+def type_masses(atoms, types):
+    """One mass per type (material id), amu; InputError when a material's particles differ in mass."""
     masses = atoms.get_masses()
-    ntypes = int(types.max()) + 1 if n else 1
+    ntypes = int(types.max()) + 1 if len(atoms) else 1
     mass_t = np.zeros(ntypes)
     for t in range(ntypes):
         m = masses[types == t]
@@ -194,14 +276,35 @@ def write_data(atoms, types, path, margin):
             continue
         if np.ptp(m) > 1e-12 * m.max():
             raise InputError("masses", f"{m.min()}..{m.max()} for material {t}",
-                             "one mass per material (LAMMPS atom_style atomic has per-type masses)")
+                             "one mass per material (LAMMPS has per-type masses)")
         mass_t[t] = m[0]
+    return mass_t
+
+
+def _check_cell(atoms):
+    cell = atoms.cell.array
+    for d in range(3):
+        if atoms.pbc[d] and (abs(cell[d, d]) <= 0 or np.abs(cell[d] - cell[d, d] * np.eye(3)[d]).max() > 0):
+            raise InputError("cell", cell.tolist(), "an orthorhombic cell along periodic axes")
+
+
+def write_data(atoms, types, path, margin, bonds=None):
+    """LAMMPS data file (metal units) of ``atoms``; returns the box (lo, hi) and the masses per type.
+
+    ``atom_style atomic``, or with ``bonds`` ((nb, 2) rows) ``atom_style bond``
+    (molecule id 0) with a ``Bonds`` section of bond type 1.
+    """
+    n = len(atoms)
+    pos = atoms.get_positions().copy()
+    cell = atoms.cell.array
+    pbc = atoms.pbc
+    mass_t = type_masses(atoms, types)
+    ntypes = len(mass_t)
+    _check_cell(atoms)
     lo = np.zeros(3)
     hi = np.zeros(3)
     for d in range(3):
         if pbc[d]:
-            if abs(cell[d, d]) <= 0 or np.abs(cell[d] - cell[d, d] * np.eye(3)[d]).max() > 0:
-                raise InputError("cell", cell.tolist(), "an orthorhombic cell along periodic axes")
             L = cell[d, d]
             pos[:, d] -= np.floor(pos[:, d] / L) * L
             pos[pos[:, d] >= L, d] -= L
@@ -214,18 +317,31 @@ def write_data(atoms, types, path, margin):
     tl = (types + 1).tolist()
     with open(path, "w") as fh:
         fh.write("clusterdyn Cluster Dynamics scene (units metal: Angstrom, g/mol, Angstrom/ps)\n\n")
-        fh.write(f"{n} atoms\n{ntypes} atom types\n\n")
+        fh.write(f"{n} atoms\n{ntypes} atom types\n")
+        if bonds is not None:
+            fh.write(f"{len(bonds)} bonds\n1 bond types\n")
+        fh.write("\n")
         for d, ax in enumerate("xyz"):
             fh.write(f"{lo[d]!r} {hi[d]!r} {ax}lo {ax}hi\n")
         fh.write("\nMasses\n\n")
         for t in range(ntypes):
             fh.write(f"{t + 1} {float(mass_t[t])!r}\n")
-        fh.write("\nAtoms # atomic\n\n")
-        fh.write("\n".join(f"{i + 1} {tl[i]} {pos[i][0]!r} {pos[i][1]!r} {pos[i][2]!r}"
-                           for i in range(n)))
+        if bonds is None:
+            fh.write("\nAtoms # atomic\n\n")
+            fh.write("\n".join(f"{i + 1} {tl[i]} {pos[i][0]!r} {pos[i][1]!r} {pos[i][2]!r}"
+                               for i in range(n)))
+        else:
+            fh.write("\nAtoms # bond\n\n")
+            fh.write("\n".join(f"{i + 1} 0 {tl[i]} {pos[i][0]!r} {pos[i][1]!r} {pos[i][2]!r}"
+                               for i in range(n)))
         fh.write("\n\nVelocities\n\n")
         fh.write("\n".join(f"{i + 1} {vel[i][0]!r} {vel[i][1]!r} {vel[i][2]!r}" for i in range(n)))
         fh.write("\n")
+        if bonds is not None and len(bonds):
+            b = (np.asarray(bonds) + 1).tolist()
+            fh.write("\nBonds\n\n")
+            fh.write("\n".join(f"{k + 1} 1 {b[k][0]} {b[k][1]}" for k in range(len(b))))
+            fh.write("\n")
     return np.array(lo), np.array(hi), mass_t
 
 
@@ -392,6 +508,87 @@ def drive_lines(atoms, dt):
     return {"groups": groups, "fixes": fixes}, meta, held
 
 
+#: special_bonds weight of the set-up bonds (1-2 pairs): strictly between 0 and 1, so that LAMMPS keeps
+#: those pairs in its neighbour lists and lets every pair sub-style set its own weight (pair_modify special)
+BOND_MARK = 0.5
+
+
+def pair_lines(calc, entries, n_points, J, initial, seed, cutoff):
+    """The pair (and bond) commands of the deck.
+
+    ``attraction="all"``: ``pair_style table`` with the law of every material
+    pair (``CD_a_b``); with damping ``hybrid/overlay`` with ``dpd/ext/tstat``
+    at zero temperature, ``gamma = eta_ab`` within the pair's cutoff.
+
+    ``attraction="initial"``: the set-up bonds are LAMMPS bonds of ``bond_style
+    zero`` (no force of their own): they only mark the bonded pairs as 1-2
+    special pairs (``special_bonds lj/coul 0.5 1.0 1.0``; ``lost/bond ignore``
+    since a bond beyond the cutoff does nothing).  Two table sub-styles:
+    ``table 1`` (the law ``CD_a_b``, weight 1 for every pair) and ``table 2``
+    (the remainder ``CDR_a_b``, weight 0 for the bonded pairs), so bonded
+    pairs feel the law and the others its repulsive-only form.  Damping
+    (clusterdyn: bonded pairs within the cutoff, other pairs within r0_ab):
+    ``dpd/ext/tstat 1`` with eta within the cutoff for every pair, ``2`` with
+    -eta within the cutoff and ``3`` with eta within r0_ab, both weight 0 for
+    the bonded pairs.  ``pair_modify neigh/trim no``: every sub-style reads
+    the one list of the largest cutoff (LAMMPS fails to order the trimmed
+    lists of sub-styles with the smaller r0_ab cutoff).
+    """
+    nt = len(calc.potentials)
+    full = [e for e in entries if e[2].startswith("CD_")]
+    rem = [e for e in entries if e[2].startswith("CDR_")]
+    eta_tt = None if J is None else calc.damping_matrix(J) * units.TIME_TO_PS
+    # eta [amu/t_ase] * v [A/t_ase] = F [eV/A]; v_ase = v_ps * (t_ase/ps) -> gamma = eta * TIME_TO_PS (eV ps/A^2)
+    dpd = f"dpd/ext/tstat 0.0 0.0 {cutoff!r}"
+
+    def dpd_coeffs(style, sign, at_r0=False):
+        out = []
+        for a in range(nt):
+            for b in range(a, nt):
+                g = sign * float(eta_tt[a, b])
+                law = calc.tables[a][b]
+                rc_ab = float(law.law.r0) if at_r0 else float(law.cutoff)
+                out.append(f"pair_coeff      {a + 1} {b + 1} {style} {g!r} {g!r} 0.0 0.0 {rc_ab!r}")
+        return out
+
+    lines = []
+    if not initial:
+        if J is None:
+            lines.append(f"pair_style      table linear {n_points}")
+            lines += [f"pair_coeff      {a + 1} {b + 1} {TABLE_FILE} {name}" for a, b, name, _, _ in full]
+        else:
+            lines.append("comm_modify     vel yes")
+            lines.append(f"pair_style      hybrid/overlay table linear {n_points} {dpd} {int(seed)}")
+            lines += [f"pair_coeff      {a + 1} {b + 1} table {TABLE_FILE} {name}" for a, b, name, _, _ in full]
+            lines += dpd_coeffs("dpd/ext/tstat", 1.0)
+        return lines
+    lines += [
+        "bond_style      zero",
+        "bond_coeff      *",
+        "# set-up bonds (attraction=initial) as 1-2 special pairs; each pair sub-style sets its own weight",
+        f"special_bonds   lj/coul {BOND_MARK!r} 1.0 1.0",
+    ]
+    styles = f"table linear {n_points} table linear {n_points}"
+    if J is not None:
+        lines.append("comm_modify     vel yes")
+        styles += "".join(f" {dpd} {int(seed) + k}" for k in range(3))
+    lines.append(f"pair_style      hybrid/overlay {styles}")
+    lines += [f"pair_coeff      {a + 1} {b + 1} table 1 {TABLE_FILE} {name}" for a, b, name, _, _ in full]
+    lines += [f"pair_coeff      {a + 1} {b + 1} table 2 {TABLE_FILE} {name}" for a, b, name, _, _ in rem]
+    # one untrimmed list for every sub-style (LAMMPS cannot order the trimmed lists of this mix)
+    lines += ["pair_modify     neigh/trim no",
+              "pair_modify     pair table 1 special lj 1.0 1.0 1.0",
+              "pair_modify     pair table 2 special lj 0.0 1.0 1.0"]
+    if J is not None:
+        lines += dpd_coeffs("dpd/ext/tstat 1", 1.0)
+        lines += dpd_coeffs("dpd/ext/tstat 2", -1.0)
+        lines += dpd_coeffs("dpd/ext/tstat 3", 1.0, at_r0=True)
+        lines += ["pair_modify     pair dpd/ext/tstat 1 special lj 1.0 1.0 1.0",
+                  "pair_modify     pair dpd/ext/tstat 2 special lj 0.0 1.0 1.0",
+                  "pair_modify     pair dpd/ext/tstat 3 special lj 0.0 1.0 1.0"]
+    return lines
+
+
 @dataclass
 class ExportInfo:
     folder: Path
@@ -399,6 +596,34 @@ class ExportInfo:
     dt_ps: float
     n_points: int
     groups: dict = field(default_factory=dict)
+
+
+def check_deck(atoms, calc, dyn):
+    """Everything :func:`export_lammps` refuses, checked without writing anything.
+
+    Refused (:class:`~clusterdyn.errors.InputError`, one line): a calculator
+    other than ClusterDynamics, dynamics other than clusterdyn's
+    :class:`~clusterdyn.md.DampedVerlet` or ASE's velocity Verlet (both are
+    velocity Verlet, which ``fix nve`` is), a drive without a LAMMPS form
+    (:func:`drive_lines`), one-sided set-up bonds (:func:`initial_bond_pairs`),
+    masses that differ within a material, a non-orthorhombic periodic cell.
+    Returns ``(drive commands, drive meta, held groups, bonds or None)``.
+    """
+    from ase.md.verlet import VelocityVerlet
+
+    from ..calculators.cluster import ClusterDynamics
+    from ..md.damped import DampedVerlet
+    if not isinstance(calc, ClusterDynamics):
+        raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
+    if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
+        raise InputError("dyn", type(dyn).__name__, "DampedVerlet or ASE's VelocityVerlet (LAMMPS' fix nve)")
+    calc.setup(atoms)
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    drive_cmds, groups, held = drive_lines(atoms, dt)
+    bonds = initial_bond_pairs(atoms, calc) if calc.parameters.attraction == "initial" else None
+    type_masses(atoms, calc._check_types(atoms))
+    _check_cell(atoms)
+    return drive_cmds, groups, held, bonds
 
 
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
@@ -426,22 +651,20 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
 
     Returns the folder (a :class:`pathlib.Path`).
     """
-    from ..calculators.cluster import ClusterDynamics
-    if not isinstance(calc, ClusterDynamics):
-        raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
-    calc.setup(atoms)
+    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn)   # refusals before any file is written
     dt = float(dyn.dt) if dyn is not None else 0.0
-    drive_cmds, groups, held = drive_lines(atoms, dt)    # refusals come before any file is written
+    initial = bonds is not None
+    if initial:
+        n_points = aligned_points(calc, n_points)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = len(atoms)
     types = calc._check_types(atoms)
-    nt = len(calc.potentials)
     cutoff = float(max(t.cutoff for row in calc.tables for t in row))
     if skin is None:
         skin = calc.nl.skin
-    lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff)
-    entries = write_tables(calc, folder / TABLE_FILE, n_points)
+    lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff, bonds=bonds)
+    entries = write_tables(calc, folder / TABLE_FILE, n_points, remainder=initial)
     dt_ps = dt * units.TIME_TO_PS
     nsteps = 0 if nsteps is None else int(nsteps)
     J = getattr(dyn, "J", None)
@@ -452,29 +675,13 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         "# clusterdyn export: Cluster Dynamics (CD eq. 1-2, 5-6) as LAMMPS input",
         "# units metal: Angstrom, eV, g/mol (= amu), ps; velocities Angstrom/ps",
         "units           metal",
-        "atom_style      atomic",
+        f"atom_style      {'bond' if initial else 'atomic'}",
         "atom_modify     map array",
         f"boundary        {bstr}",
         "newton          on",
         f"read_data       {DATA_FILE}",
     ]
-    if J is None:
-        lines.append(f"pair_style      table linear {n_points}")
-        for a, b, name, r_lo, r_hi in entries:
-            lines.append(f"pair_coeff      {a + 1} {b + 1} {TABLE_FILE} {name}")
-    else:
-        eta_tt = calc.damping_matrix(J) * units.TIME_TO_PS      # amu/ASE-time -> eV ps/Angstrom^2
-        # eta [amu/t_ase] * v [A/t_ase] = F [eV/A]; v_ase = v_ps * (t_ase/ps) -> gamma = eta * TIME_TO_PS
-        lines.append("comm_modify     vel yes")
-        lines.append(f"pair_style      hybrid/overlay table linear {n_points} "
-                     f"dpd/ext/tstat 0.0 0.0 {cutoff!r} {int(seed)}")
-        for a, b, name, r_lo, r_hi in entries:
-            lines.append(f"pair_coeff      {a + 1} {b + 1} table {TABLE_FILE} {name}")
-        for a in range(nt):
-            for b in range(a, nt):
-                g = float(eta_tt[a, b])
-                rc_ab = float(calc.tables[a][b].cutoff)
-                lines.append(f"pair_coeff      {a + 1} {b + 1} dpd/ext/tstat {g!r} {g!r} 0.0 0.0 {rc_ab!r}")
+    lines += pair_lines(calc, entries, n_points, J, initial, seed, cutoff)
     lines += [f"neighbor        {float(skin)!r} bin",
               "neigh_modify    every 1 delay 0 check yes"]
     lines += drive_cmds["groups"]
@@ -487,7 +694,7 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     lines += [
         f"timestep        {float(dt_ps)!r}",
         "thermo_style    custom step time pe ke etotal",
-        "thermo_modify   format float %.17g",
+        "thermo_modify   format float %.17g" + (" lost/bond ignore" if initial else ""),
         f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
     ]
     if frames:
@@ -501,7 +708,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
     meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
             "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
-            "skin_A": float(skin), "groups": groups,
+            "skin_A": float(skin), "groups": groups, "attraction": calc.parameters.attraction,
+            "n_bonds": None if bonds is None else int(len(bonds)),
             "tables": [{"a": a, "b": b, "entry": e, "r_lo_A": lo_, "r_hi_A": hi_}
                        for a, b, e, lo_, hi_ in entries],
             "units": "metal", "extra": extra or {}}

