@@ -43,6 +43,14 @@ def test_plate_impact_restart_is_bit_for_bit(tmp_path, capsys):
     _restart_equals_full_run(tmp_path, "plate-impact", TINY_IMPACT, capsys)
 
 
+def test_u_history_driven_shock_restart_is_bit_for_bit(tmp_path, capsys):
+    """A scene driven by a U(t) piston (a ramp read from CSV): 2N = N + restart + N."""
+    csv = tmp_path / "ramp.csv"
+    csv.write_text("t_ns,u_km_s\n0,1.0\n20,3.0\n")
+    da, db = _restart_equals_full_run(tmp_path, "shock", TINY_SHOCK + ["--set", f"u_history={csv}"], capsys)
+    assert db["params"]["u_history"] == str(csv)
+
+
 def test_restart_refuses_a_physics_key_and_another_scene(tmp_path, capsys):
     out = tmp_path / "a"
     assert main(["run", "shock", "--quiet", "--out", str(out)] + TINY_SHOCK) == 0
