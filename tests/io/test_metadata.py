@@ -104,10 +104,10 @@ def test_metadata_round_trip(tmp_path):
         assert mats[1]["curve"] == {"kind": "murnaghan", "rho0": 2.0 * units.g_cm3,
                                     "c0": 2.5 * units.km_s, "n": 4.0}
         assert meta["units"]["length"] == "Angstrom" and meta["units"]["energy"] == "eV"
-        # drives: the piston without describe() (class, attributes), the tagged one with it
+        # drives: the piston by its describe(), the tagged one by its own
         pist, tag = meta["constraints"]
-        assert pist["class"] == "Piston" and pist["attributes"]["velocity"] == \
-            [0.5 * units.km_s, 0.0, 0.0]
+        assert pist["class"] == "Piston" and pist["velocity"] == {"law": "constant", "value_km_s": 0.5} \
+            and pist["direction"] == [1.0, 0.0, 0.0]
         assert tag == {"kind": "tagged", "normal": [1.0, 0.0, 0.0], "stiffness_eV_A2": 2.5,
                        "class": "Tagged", "particles": "id", "ids": tag["ids"]}
         ids = atoms.arrays["id"]
@@ -145,7 +145,7 @@ def test_metadata_round_trip(tmp_path):
         in text
     assert "1 soft-test: rho0 2 g/cm3, c0 2.5 km/s, r0 5.1 um" in text
     assert "damping:      J = 30 (Gamma = c0/(J r0))" in text
-    assert "Piston(" in text and "[acts on" in text and "kind=tagged" in text
+    assert "kind=Piston" in text and "[acts on" in text and "kind=tagged" in text
     d = h5md_info(path)
     json.dumps(d)                                                 # clusterdyn info --json
     assert d["metadata"]["constraints"][1]["n_particles"] == int(wall.sum())
@@ -323,7 +323,7 @@ def test_mca_pair_state_every_frame(tmp_path):
         assert a.info["mca_materials"] == ["alumina"] and a.info["mca_dim"] == 3
         assert r.metadata["calculator"]["class"] == "MCA"
         assert r.metadata["damping"]["damping"] == 0.05
-        assert [c["class"] for c in r.metadata["constraints"]] == ["Grip", "Grip"]
+        assert [c["class"] for c in r.metadata["constraints"]] == ["Piston", "Piston"]
         with pytest.raises(InputError, match="ClusterDynamics"):
             r.calculator()
     with h5py.File(path, "r") as f:
