@@ -12,9 +12,12 @@ Each step (``dt``), with momenta ``p`` and angular velocities ``omega``:
    functions the materials use run (radial return, damage, fracture,
    healing); if they changed anything the forces are evaluated again at the
    same positions (the state is never changed inside a property call);
-5. the drives take their forces (and record them), half kick with the new
-   forces (plus the optional pair damping), the drives set their layers'
-   momenta for the step's end.
+5. the pair damping (optional) at the half-step velocities; the drives take
+   their forces (and record them); half kick with the new forces, the
+   drives set their layers' momenta for the step's end.  The damping forces
+   serve both half kicks around a time (as in
+   :class:`~clusterdyn.md.DampedVerlet`), so the forces a drive records are
+   those that moved the particles and its impulse is the momentum it gave.
 
 Stored elastic energy (docs/mca.md, "Energy"): the work of the pair forces, accumulated
 trapezoidally, ``W += -1/2 (F_n + F_{n+1}) . dR - 1/2 (T_n + T_{n+1}) . dtheta``;
@@ -136,6 +139,9 @@ class MCADynamics(MolecularDynamics):
         self._F = None
         self._setup_masses()
         self._evaluate(commit=False)
+        self._Fd = self._Td = None
+        if self.damping > 0:        # the first half kick's damping: present velocities
+            self._Fd, self._Td = self._damping_forces(atoms.get_velocities(), atoms.arrays["omega"])
         if state is not None:
             self._restore_counters(state)
         self._drives()
@@ -340,9 +346,9 @@ class MCADynamics(MolecularDynamics):
         w = atoms.arrays["omega"].copy()
         F0, T0 = self._F, self._T
         Fe, Te = F0, T0
-        if self.damping > 0:
-            fd, td = self._damping_forces(p / m, w)
-            Fe, Te = F0 + fd, T0 + td
+        if self.damping > 0:                   # the damping of the last evaluation (half-step velocities)
+            fd0, td0 = self._Fd, self._Td
+            Fe, Te = F0 + fd0, T0 + td0
         drives = self._drives()
         Fe = self._constrained(Fe)             # the step's start: a drive records only its first sample
         for d in drives:
@@ -372,7 +378,8 @@ class MCADynamics(MolecularDynamics):
         if self.damping > 0:
             fd, td = self._damping_forces(p / m, w)
             Fe, Te = F1 + fd, T1 + td
-            self.dissipated -= np.sum(fd * dx) + np.sum(td * dth)
+            self.dissipated -= 0.5 * (np.sum((fd0 + fd) * dx) + np.sum((td0 + td) * dth))
+            self._Fd, self._Td = fd, td
         Fe = self._constrained(Fe)             # the drives record their forces at the step's end
         p += h * Fe
         w += h * Te / J
@@ -422,6 +429,9 @@ class MCADynamics(MolecularDynamics):
             d["contact_S_mean"] = self._S_mean.copy()
         d["forces"] = self._F.copy()       # the forces of the next half kick, exactly
         d["torques"] = self._T.copy()
+        if self._Fd is not None:
+            d["damping_forces"] = self._Fd.copy()
+            d["damping_torques"] = self._Td.copy()
         return d
 
     def set_state(self, d):
@@ -435,6 +445,8 @@ class MCADynamics(MolecularDynamics):
         self._S_mean = None
         self._setup_masses()
         self._evaluate(commit=False)
+        if self.damping > 0:
+            self._Fd, self._Td = self._damping_forces(self.atoms.get_velocities(), self.atoms.arrays["omega"])
         self._restore_counters(d)
 
     def _restore_counters(self, d):
@@ -446,6 +458,9 @@ class MCADynamics(MolecularDynamics):
         if "forces" in d:
             self._F = np.array(d["forces"], dtype=float)
             self._T = np.array(d["torques"], dtype=float)
+        if "damping_forces" in d and self.damping > 0:
+            self._Fd = np.array(d["damping_forces"], dtype=float)
+            self._Td = np.array(d["damping_torques"], dtype=float)
 
 
 def out_f_trial(out, F1):
