@@ -34,9 +34,11 @@ histories, records and time state; ASE constraints through ``todict()``)
 and the caller's ``extra``; the run continues bit for bit.  State layout::
 
     /state/run_format       2
-    /state/dynamics_class   e.g. 'DampedVerlet' (a key of RUN_KINDS)
+    /state/dynamics_class   'DampedVerlet' or 'MCADynamics' (a key of RUN_KINDS)
     /state/dynamics         dyn.get_state()
-    /state/calculator       {'class': 'ClusterDynamics', 'parameters': {...}}
+    /state/calculator       {'class': 'ClusterDynamics', 'parameters': {...}}, or for MCA
+                            {'class': 'MCA', 'dim', 'interfaces', 'materials' (JSON records)}
+    /state/run              (MCA) the dynamics' settings: dt, damping, contact_every, ...
     /state/constraints      [{'drive': drive.get_state()} or {'ase': JSON of c.todict()}, ...]
     /state/extra            the caller's dict
 
@@ -418,6 +420,10 @@ def register_run_kind(name, save, load):
     whole stored state dict, attaches the calculator and returns the
     dynamics, restored.  ``name`` is ``type(dyn).__name__``.  The constraints
     and ``extra`` are handled by save_run/load_run for every kind.
+
+    ``save`` may also return ``'info'``: ``{key: encodable value}`` written in
+    place of ``atoms.info[key]`` (e.g. material names for Material objects);
+    ``load`` then gets the Atoms with those values and restores the entries.
     """
     RUN_KINDS[name] = (save, load)
 
@@ -454,6 +460,45 @@ def _damped_load(atoms, state, **kwargs):
 register_run_kind("DampedVerlet", _damped_save, _damped_load)
 
 
+def _mca_save(dyn):
+    from clusterdyn.io._common import to_jsonable
+    from clusterdyn.io.metadata import describe_material
+    st = dyn.state
+    mats = [describe_material(m, None, k) for k, m in enumerate(st.materials)]
+    cal = {"class": "MCA", "dim": int(st.dim), "materials": json.dumps(to_jsonable(mats)),
+           "interfaces": [[float(a), float(b), float(t), float(c)] for (a, b), (t, c) in st.interfaces.items()]}
+    run = {"dt": float(dyn.dt), "damping": float(dyn.damping), "contact_every": int(dyn.contact_every),
+           "check_timestep": bool(dyn.check_timestep), "hold_layer_rotation": bool(dyn.hold_layer_rotation)}
+    out = {"dynamics": dyn.get_state(), "calculator": cal, "run": run}
+    if "mca_materials" in dyn.atoms.info:          # Material objects: stored as records in 'calculator'
+        out["info"] = {"mca_materials": [m.name for m in st.materials]}
+    return out
+
+
+def _mca_load(atoms, state, **kwargs):
+    from clusterdyn.io.metadata import material_from_description
+    from clusterdyn.mca.calculator import MCA
+    from clusterdyn.mca.dynamics import MCADynamics
+    cal = state["calculator"]
+    mats = []
+    for d in json.loads(cal["materials"]):
+        m = material_from_description(d)[1]
+        if m.hardening is None and isinstance(d.get("hardening"), list):
+            m = m.replace(hardening=d["hardening"])
+        mats.append(m)
+    if "mca_materials" in atoms.info:
+        atoms.info["mca_materials"] = list(mats)
+    interfaces = {(int(a), int(b)): (float(t), float(c)) for a, b, t, c in cal.get("interfaces") or []}
+    atoms.calc = MCA(materials=mats, interfaces=interfaces or None, dim=int(cal["dim"]))
+    r = state["run"]
+    return MCADynamics(atoms, timestep=float(r["dt"]), damping=float(r["damping"]),
+                       contact_every=int(r["contact_every"]), check_timestep=bool(r["check_timestep"]),
+                       hold_layer_rotation=bool(r["hold_layer_rotation"]), state=state["dynamics"], **kwargs)
+
+
+register_run_kind("MCADynamics", _mca_save, _mca_load)
+
+
 def save_run(path, dyn, extra=None):
     """Write a whole run to the checkpoint ``path``, atomically; returns ``path``.
 
@@ -462,8 +507,9 @@ def save_run(path, dyn, extra=None):
     path : str or os.PathLike
         Destination (its folder must exist); replaced only once complete.
     dyn : ase.md.md.MolecularDynamics
-        A dynamics of a registered kind (:class:`~clusterdyn.md.DampedVerlet`;
-        others through :func:`register_run_kind`).  Its Atoms (every array),
+        A dynamics of a registered kind (:class:`~clusterdyn.md.DampedVerlet`,
+        :class:`~clusterdyn.mca.MCADynamics` with its pair state; others
+        through :func:`register_run_kind`).  Its Atoms (every array),
         its state, its calculator's set-up and the Atoms' constraints in order
         are stored: drives (:mod:`clusterdyn.md.drives`) with their state,
         ASE constraints through ``todict()``.
@@ -495,15 +541,20 @@ def save_run(path, dyn, extra=None):
             raise InputError("atoms.constraints", type(c).__name__,
                              "drives of clusterdyn.md.drives or ASE constraints with todict()")
     state = {"run_format": RUN_FORMAT, "dynamics_class": kind}
-    state.update(RUN_KINDS[kind][0](dyn))
+    saved = dict(RUN_KINDS[kind][0](dyn))
+    info = saved.pop("info", None) or {}
+    state.update(saved)
     state["constraints"] = cons
     state["extra"] = extra if extra is not None else {}
-    kept = list(atoms.constraints)
+    kept, kept_info = list(atoms.constraints), atoms.info
     atoms.set_constraint()
+    if info:
+        atoms.info = {**kept_info, **info}
     try:
         write_checkpoint(path, atoms, state)
     finally:
         atoms.set_constraint(kept)
+        atoms.info = kept_info
     return path
 
 

@@ -27,7 +27,8 @@
   piston as ``fix move linear``, a piston with a U(t) table as ``fix move
   variable`` with equal-style displacement and velocity variables, a wall as
   ``fix wall/region`` on a plane region with the harmonic law; a traction, a
-  sticking wall or a callable U(t) are refused by name), the rest integrated by ``fix nve``
+  sticking wall, a callable or smooth-ramp U(t) and a piston with
+  free lateral motion are refused by name), the rest integrated by ``fix nve``
   (velocity Verlet; the damping then sees half-step velocities, as in
   :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
 - ``cd.json``: what the export knew (units, steps, groups, scene parameters).
@@ -432,6 +433,9 @@ def drive_lines(atoms, dt):
     V = units.VEL_TO_A_PER_PS
     for k, c in enumerate(atoms.constraints):
         if isinstance(c, Piston):
+            if c.lateral != "fixed":
+                raise InputError("atoms.constraints", repr(c), "pistons with lateral='fixed' (this export moves "
+                                 "the whole layer with fix move)")
             name = f"piston{k}"
             ids = np.asarray(c.index) + 1
             groups += _group_lines(name, ids)
@@ -464,8 +468,9 @@ def drive_lines(atoms, dt):
                 meta[name] = {"kind": "Piston", "law": "table", "n": int(ids.size), "t0_ps": t0_ps,
                               "t_ps": t_ps.tolist(), "velocity_A_per_ps": (vals * V).tolist()}
             else:
-                raise InputError("atoms.constraints", f"Piston with a callable U(t) ({c.history!r})",
-                                 "a constant or Table history (a Python callable has no LAMMPS form)")
+                raise InputError("atoms.constraints", f"Piston with a {c.history.law} U(t) ({c.history!r})",
+                                 "a constant or Table history (pass a Table: a Python callable or a smooth "
+                                 "ramp has no LAMMPS form here)")
         elif isinstance(c, Wall):
             if c.sticking:
                 raise InputError("atoms.constraints", repr(c),

@@ -18,8 +18,8 @@ group, JSON text datasets (numbers in ASE units: Angstrom, eV, amu, ASE time)::
         damping                {"J": J} of a DampedVerlet (None = no damping),
                                {"damping": fraction of critical} of MCA dynamics
         units                  the unit system of the numbers above
-        constraints/<k>        one group per constraint on the Atoms and per drive
-                               of the dynamics (``dyn.grips``), in order:
+        constraints/<k>        one group per constraint on the Atoms (drives included),
+                               in order:
             description        ``c.describe()`` when it has one, else
                                {"class", "module", "repr" (at most 300
                                characters), "attributes" (its public scalar
@@ -301,7 +301,6 @@ def run_metadata(atoms, dyn=None):
     """
     calc, mats = _calculator_section(atoms, atoms.calc)
     drives = [_describe_drive(c, atoms) for c in atoms.constraints]
-    drives += [_describe_drive(g, atoms) for g in getattr(dyn, "grips", None) or ()]
     return {"calculator": calc, "materials": mats, "damping": damping_of(dyn),
             "units": UNITS, "constraints": drives}
 

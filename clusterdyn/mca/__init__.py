@@ -18,7 +18,7 @@ Public API::
 import importlib
 
 _LAZY = {
-    "MCA": "calculator", "MCAState": "state", "MCADynamics": "dynamics", "Grip": "dynamics",
+    "MCA": "calculator", "MCAState": "state", "MCADynamics": "dynamics",
     "default_timestep": "dynamics", "wave_speeds": "dynamics",
 }
 

@@ -1,25 +1,39 @@
 """MCADynamics: velocity Verlet for translations and rotations, and the MCA pair state.
 
-Each step (``dt``):
+Each step (``dt``), with momenta ``p`` and angular velocities ``omega``:
 
-1. half kick ``V += dt/2 F/m``, ``omega += dt/2 T/J`` (spheres: ``J = m d^2/10``;
+1. half kick ``p += dt/2 F``, ``omega += dt/2 T/J`` (spheres: ``J = m d^2/10``;
    2D cylinders about z: ``J = m d^2/8``; isotropic J, so no gyroscopic term);
-   grips impose their velocity;
-2. drift ``R += dt V``, ``theta += dt omega``;
+   the drives (:mod:`clusterdyn.md.drives`) set their layers' momenta for the
+   drift;
+2. drift ``R += dt p/m``, ``theta += dt omega``;
 3. trial forces from the calculator at the new positions (state unchanged);
 4. *commit*: the trial pair forces become the state, then the response
    functions the materials use run (radial return, damage, fracture,
    healing); if they changed anything the forces are evaluated again at the
    same positions (the state is never changed inside a property call);
-5. half kick with the new forces (plus the optional pair damping), grips again.
+5. the pair damping (optional) at the half-step velocities; the drives take
+   their forces (and record them); half kick with the new forces, the
+   drives set their layers' momenta for the step's end.  The damping forces
+   serve both half kicks around a time (as in
+   :class:`~clusterdyn.md.DampedVerlet`), so the forces a drive records are
+   those that moved the particles and its impulse is the momentum it gave.
 
-Stored elastic energy (physics.md 2.5): the work of the pair forces, accumulated
+Stored elastic energy (docs/mca.md, "Energy"): the work of the pair forces, accumulated
 trapezoidally, ``W += -1/2 (F_n + F_{n+1}) . dR - 1/2 (T_n + T_{n+1}) . dtheta``;
 ``kinetic + rotational + stored`` is conserved to O(dt^2) without damping.
 
 Dissipation and driving live here, not in the calculator: viscous damping of
 the relative velocity at the contact point of every pair (``damping`` = fraction
-of the critical damping of a pair), and grips.
+of the critical damping of a pair), and the drives of :mod:`clusterdyn.md.drives`
+(ASE constraints on the Atoms: :class:`~clusterdyn.md.Piston` with a velocity
+history U(t), e.g. a :class:`~clusterdyn.md.SmoothRamp`, and
+``lateral="free"`` for a grip whose automata move freely across it;
+:class:`~clusterdyn.md.Traction` for a layer pressed at a prescribed stress).
+They act on velocities only: the angular velocities of their automata are
+left to the torques unless ``hold_layer_rotation=True`` (jaws glued to the
+sample: the automata of every piston and traction layer do not rotate).  The
+drives' force records include the pair damping on their layers.
 """
 
 import math
@@ -28,6 +42,7 @@ import numpy as np
 from ase.md.md import MolecularDynamics
 
 from ..errors import InputError, InstabilityError
+from ..md.drives import Drive, Traction, _Layer
 from ..neighbors import NeighborList
 from . import kernels as K
 from .response import brittle, degrading, healing, plastic, plastic_degrading
@@ -53,73 +68,36 @@ def default_timestep(atoms, materials=None, courant=COURANT):
     return float(courant * np.min(d / cl[mid]))
 
 
-def smooth_ramp(t, ramp_time):
-    """0 -> 1 over ``ramp_time`` with zero slope at both ends (half cosine)."""
-    if ramp_time <= 0 or t >= ramp_time:
-        return 1.0
-    if t <= 0:
-        return 0.0
-    return 0.5 * (1.0 - math.cos(math.pi * t / ramp_time))
-
-
-class Grip:
-    """A layer of automata driven with a smoothly ramped velocity along ``axis``.
-
-    Parameters
-    ----------
-    ids : array of particle ids (``atoms.arrays['id']``) or a boolean mask over rows
-    axis : 0, 1, 2
-    velocity : float (Angstrom / ASE time) reached after ``ramp_time``, or a
-        callable ``v(t)`` (t in ASE time) for load paths (unload, reload)
-    ramp_time : float, ASE time
-    lateral : "free" (default) or "fixed" (lateral velocity zero)
-
-    The grip automata do not rotate.  ``reaction`` is the force the sample
-    exerts on the grip along ``axis`` at the last step (eV/Angstrom).
-    """
-
-    def __init__(self, ids, axis, velocity, ramp_time=0.0, lateral="free"):
-        self.ids = np.asarray(ids)
-        if axis not in (0, 1, 2):
-            raise InputError("axis", axis, "0, 1 or 2")
-        if lateral not in ("free", "fixed"):
-            raise InputError("lateral", lateral, "'free' or 'fixed'")
-        self.axis = axis
-        self.velocity = velocity
-        self.ramp_time = float(ramp_time)
-        self.lateral = lateral
-        self.reaction = 0.0
-        self.displacement = 0.0
-
-    def v(self, t):
-        if callable(self.velocity):
-            return float(self.velocity(t))
-        return float(self.velocity) * smooth_ramp(t, self.ramp_time)
-
-    def rows(self, atoms):
-        if self.ids.dtype == bool:
-            return np.nonzero(self.ids)[0]
-        ids = atoms.arrays["id"]
-        return np.nonzero(np.isin(ids, self.ids))[0]
-
-
 class MCADynamics(MolecularDynamics):
     """Movable Cellular Automata dynamics (ASE MolecularDynamics).
 
     Parameters
     ----------
     atoms : Atoms with an :class:`~clusterdyn.mca.calculator.MCA` calculator
+        Drives (:mod:`clusterdyn.md.drives`: pistons, tractions, walls) and
+        velocity constraints such as ASE's ``FixAtoms`` go on
+        ``atoms.constraints``; they are bound to this dynamics (their time is
+        ``nsteps * dt``) and act through ``adjust_forces`` and
+        ``adjust_momenta`` (the drift follows the momenta).
     timestep : float, ASE time; default :func:`default_timestep` (C = 0.15)
     damping : float, fraction of critical damping of the relative pair velocity
         (0 = off, for wave and conservation problems; ~0.1-0.5 quasi-static)
-    grips : list of :class:`Grip`
     contact_every : int, steps between searches for new contacts (only when the
         sample can fracture or has pre-cracks)
     check_timestep : raise InstabilityError if ``timestep`` exceeds the measured limit
+    hold_layer_rotation : bool, default False
+        The automata of every piston and traction layer keep ``omega = 0`` (a
+        grip glued to the sample); otherwise a drive leaves angular velocities alone.
+    state : dict, optional
+        :meth:`get_state` of a run to continue (no tessellation is made).
+
+    In 2D plane strain (``dim=2``) the drives' directions must lie in the x-y
+    plane; a :class:`~clusterdyn.md.Traction` without an area gets the
+    periodic cell length across its normal times the unit thickness (1 Angstrom).
     """
 
-    def __init__(self, atoms, timestep=None, *, damping=0.0, grips=(), contact_every=25,
-                 check_timestep=True, state=None, trajectory=None, logfile=None, loginterval=1, **kw):
+    def __init__(self, atoms, timestep=None, *, damping=0.0, contact_every=25, check_timestep=True,
+                 hold_layer_rotation=False, state=None, trajectory=None, logfile=None, loginterval=1, **kw):
         calc = atoms.calc
         from .calculator import MCA
         if not isinstance(calc, MCA):
@@ -144,9 +122,12 @@ class MCADynamics(MolecularDynamics):
                          loginterval=loginterval, **kw)
         if not 0.0 <= damping:
             raise InputError("damping", damping, "a fraction of critical damping >= 0")
+        if not isinstance(hold_layer_rotation, (bool, np.bool_)):
+            raise InputError("hold_layer_rotation", hold_layer_rotation, "True or False")
         self.damping = float(damping)
-        self.grips = list(grips)
+        self.hold_layer_rotation = bool(hold_layer_rotation)
         self.contact_every = int(contact_every)
+        self.check_timestep = bool(check_timestep)
         self.stored_work = 0.0
         self.dissipated = 0.0
         n = len(atoms)
@@ -154,11 +135,64 @@ class MCADynamics(MolecularDynamics):
             if name not in atoms.arrays:
                 atoms.new_array(name, np.zeros((n, 3)))
         self._nl = None
+        self._S_mean = None
         self._F = None
         self._setup_masses()
         self._evaluate(commit=False)
+        self._Fd = self._Td = None
+        if self.damping > 0:        # the first half kick's damping: present velocities
+            self._Fd, self._Td = self._damping_forces(atoms.get_velocities(), atoms.arrays["omega"])
         if state is not None:
             self._restore_counters(state)
+        self._drives()
+
+    # ------------------------------------------------------------------ drives
+    def _drives(self):
+        """The drives among the constraints, bound to this dynamics (binds and checks new ones)."""
+        ds = []
+        for c in self.atoms.constraints:
+            if isinstance(c, Drive):
+                if c._dyn is not self:
+                    self._check_drive(c)
+                    c.bind(self)
+                ds.append(c)
+        return ds
+
+    def _check_drive(self, c):
+        if self.state.dim != 2:
+            return
+        for name in ("direction", "normal", "tangent"):
+            v = getattr(c, name, None)
+            if v is not None and abs(float(v[2])) > 1e-12:
+                raise InputError(f"{c.kind}.{name}", np.asarray(v).tolist(),
+                                 "a direction in the x-y plane (2D plane strain)")
+        if isinstance(c, Traction) and c.area is None:
+            cell, pbc = self.atoms.cell.array, self.atoms.pbc
+            across = [a for a in (0, 1) if abs(float(c.normal[a])) < 1e-12]
+            if len(across) != 1 or not pbc[across[0]]:
+                raise InputError("Traction.area", None, "an area (Angstrom^2, per unit thickness in 2D): it is "
+                                 "derived only for a normal along x or y with the other in-plane axis periodic")
+            c.area = float(cell[across[0], across[0]]) * 1.0      # unit thickness
+
+    def _layer_rows(self):
+        rows = [d.index for d in self._drives() if isinstance(d, _Layer)]
+        return np.concatenate(rows) if rows else np.zeros(0, np.int64)
+
+    def _constrained(self, forces):
+        """A copy of ``forces`` adjusted by the constraints (drives take and record theirs)."""
+        cons = self.atoms.constraints
+        if not cons:
+            return forces
+        f = np.array(forces, dtype=np.float64, order="C")
+        for c in cons:
+            c.adjust_forces(self.atoms, f)
+        return f
+
+    def _constrain_motion(self, p, w):
+        for c in self.atoms.constraints:
+            c.adjust_momenta(self.atoms, p)
+        if self.hold_layer_rotation:
+            w[self._layer_rows()] = 0.0
 
     # ------------------------------------------------------------------ helpers
     def _setup_masses(self):
@@ -178,7 +212,7 @@ class MCADynamics(MolecularDynamics):
     def todict(self):
         d = super().todict()
         d.update({"damping": self.damping, "contact_every": self.contact_every,
-                  "grips": len(self.grips)})
+                  "hold_layer_rotation": self.hold_layer_rotation})
         return d
 
     @property
@@ -268,16 +302,6 @@ class MCADynamics(MolecularDynamics):
             td[:, :2] = 0.0
         return fd, td
 
-    def _apply_grips(self, v, w, t):
-        for g in self.grips:
-            rows = g.rows(self.atoms)
-            v[rows, g.axis] = g.v(t)
-            if g.lateral == "fixed":
-                for a in range(3):
-                    if a != g.axis:
-                        v[rows, a] = 0.0
-            w[rows] = 0.0
-
     def _contacts(self):
         st = self.state
         atoms = self.atoms
@@ -285,6 +309,7 @@ class MCADynamics(MolecularDynamics):
         skin = 0.25
         if self._nl is None:
             self._nl = NeighborList(2.0 * rad.max() * (1.0 + skin), 0.0, half=True)
+        if self._S_mean is None:
             S_mean = np.bincount(np.concatenate([st.pair_rows(atoms)[0], st.pair_rows(atoms)[1]]),
                                  weights=np.concatenate([st.S_p, st.S_p]), minlength=len(atoms))
             cnt = np.bincount(np.concatenate([st.pair_rows(atoms)[0], st.pair_rows(atoms)[1]]),
@@ -314,26 +339,32 @@ class MCADynamics(MolecularDynamics):
         atoms = self.atoms
         st = self.state
         dt = self.dt
+        h = 0.5 * dt
         m = atoms.get_masses()[:, None]
         J = self.J[:, None]
-        v = atoms.get_velocities()
+        p = atoms.get_momenta()
         w = atoms.arrays["omega"].copy()
         F0, T0 = self._F, self._T
         Fe, Te = F0, T0
-        if self.damping > 0:
-            fd, td = self._damping_forces(v, w)
-            Fe, Te = F0 + fd, T0 + td
-        v += 0.5 * dt * Fe / m
-        w += 0.5 * dt * Te / J
-        t_half = st.time + 0.5 * dt
-        self._apply_grips(v, w, t_half)
+        if self.damping > 0:                   # the damping of the last evaluation (half-step velocities)
+            fd0, td0 = self._Fd, self._Td
+            Fe, Te = F0 + fd0, T0 + td0
+        drives = self._drives()
+        Fe = self._constrained(Fe)             # the step's start: a drive records only its first sample
+        for d in drives:
+            d.begin_step()
+        p += h * Fe
+        w += h * Te / J
+        self._constrain_motion(p, w)
         if st.dim == 2:
-            v[:, 2] = 0.0
+            p[:, 2] = 0.0
             w[:, :2] = 0.0
-        dx = dt * v
+        dx = dt * (p / m)
         dth = dt * w
         atoms.set_positions(atoms.positions + dx, apply_constraint=False)
         atoms.arrays["theta"] += dth
+        for d in drives:
+            d.end_drift()
         st.step += 1
         st.time += dt
         if st.flags["contacts"] and self.contact_every > 0 and st.step % self.contact_every == 0:
@@ -345,20 +376,18 @@ class MCADynamics(MolecularDynamics):
                                    + np.sum((T0 + T1) * dth))
         Fe, Te = F1, T1
         if self.damping > 0:
-            fd, td = self._damping_forces(v, w)
+            fd, td = self._damping_forces(p / m, w)
             Fe, Te = F1 + fd, T1 + td
-            self.dissipated -= np.sum(fd * dx) + np.sum(td * dth)
-        v += 0.5 * dt * Fe / m
-        w += 0.5 * dt * Te / J
-        self._apply_grips(v, w, st.time)
-        for g in self.grips:
-            rows = g.rows(atoms)
-            g.reaction = -float(Fe[rows, g.axis].sum())
-            g.displacement += float(dx[rows, g.axis].mean()) if len(rows) else 0.0
+            self.dissipated -= 0.5 * (np.sum((fd0 + fd) * dx) + np.sum((td0 + td) * dth))
+            self._Fd, self._Td = fd, td
+        Fe = self._constrained(Fe)             # the drives record their forces at the step's end
+        p += h * Fe
+        w += h * Te / J
+        self._constrain_motion(p, w)
         if st.dim == 2:
-            v[:, 2] = 0.0
+            p[:, 2] = 0.0
             w[:, :2] = 0.0
-        atoms.set_velocities(v)
+        atoms.set_momenta(p, apply_constraint=False)
         atoms.arrays["omega"][:] = w
         return F1
 
@@ -396,9 +425,13 @@ class MCADynamics(MolecularDynamics):
         d["stored_work"] = float(self.stored_work)
         d["dissipated"] = float(self.dissipated)
         d["nsteps"] = int(self.nsteps)
-        d["grip_displacement"] = np.array([g.displacement for g in self.grips])
+        if self._S_mean is not None:
+            d["contact_S_mean"] = self._S_mean.copy()
         d["forces"] = self._F.copy()       # the forces of the next half kick, exactly
         d["torques"] = self._T.copy()
+        if self._Fd is not None:
+            d["damping_forces"] = self._Fd.copy()
+            d["damping_torques"] = self._Td.copy()
         return d
 
     def set_state(self, d):
@@ -409,19 +442,25 @@ class MCADynamics(MolecularDynamics):
         """
         self.state.set_state(d)
         self._nl = None
+        self._S_mean = None
         self._setup_masses()
         self._evaluate(commit=False)
+        if self.damping > 0:
+            self._Fd, self._Td = self._damping_forces(self.atoms.get_velocities(), self.atoms.arrays["omega"])
         self._restore_counters(d)
 
     def _restore_counters(self, d):
         self.stored_work = float(d.get("stored_work", 0.0))
         self.dissipated = float(d.get("dissipated", 0.0))
         self.nsteps = int(d.get("nsteps", self.state.step))
-        for g, x in zip(self.grips, np.atleast_1d(d.get("grip_displacement", []))):
-            g.displacement = float(x)
+        if "contact_S_mean" in d:
+            self._S_mean = np.array(d["contact_S_mean"], dtype=float)
         if "forces" in d:
             self._F = np.array(d["forces"], dtype=float)
             self._T = np.array(d["torques"], dtype=float)
+        if "damping_forces" in d and self.damping > 0:
+            self._Fd = np.array(d["damping_forces"], dtype=float)
+            self._Td = np.array(d["damping_torques"], dtype=float)
 
 
 def out_f_trial(out, F1):

@@ -24,6 +24,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ..neighbors.image import image_component
+
 
 @njit(cache=True)
 def _rot3(vx, vy, vz, px, py, pz):
@@ -64,11 +66,11 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
         dy = pos_nc[j, 1] - pos_nc[i, 1]
         dz = pos_nc[j, 2] - pos_nc[i, 2]
         if periodic_c[0]:
-            dx -= box_c[0] * math.floor(dx / box_c[0] + 0.5)
+            dx = image_component(dx, box_c[0])
         if periodic_c[1]:
-            dy -= box_c[1] * math.floor(dy / box_c[1] + 0.5)
+            dy = image_component(dy, box_c[1])
         if periodic_c[2]:
-            dz -= box_c[2] * math.floor(dz / box_c[2] + 0.5)
+            dz = image_component(dz, box_c[2])
         r = math.sqrt(dx * dx + dy * dy + dz * dz)
         lx = dlast_pc[p, 0]
         ly = dlast_pc[p, 1]

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials import get_material
+from ..neighbors import minimum_image
 from ..build.tessellation import tessellate
 from .kernels import incidence
 from ..materials.mca import check_mca_material
@@ -123,7 +124,7 @@ class MCAState:
         rows = self.rows(ids)
         ii, jj = rows[self.pid_p2[:, 0]], rows[self.pid_p2[:, 1]]
         d = pos[jj] - pos[ii]
-        _min_image_np(d, self.box_c, self.periodic_c)
+        minimum_image(d, self.box_c, self.periodic_c)
         self.dlast_pc = np.ascontiguousarray(d)
         self.r0_p = np.linalg.norm(d, axis=1)
         self._material_setup(atoms, ii, jj)
@@ -313,7 +314,7 @@ class MCAState:
         rows_i = np.where(swap, j_new, i_new)
         rows_j = np.where(swap, i_new, j_new)
         d = pos[rows_j] - pos[rows_i]
-        _min_image_np(d, self.box_c, self.periodic_c)
+        minimum_image(d, self.box_c, self.periodic_c)
         order = np.lexsort((pid[:, 1], pid[:, 0]))
         m = len(order)
         mats = self.mat_id_n[self.rows(self.id_n)[pid[order, 0]]], self.mat_id_n[self.rows(self.id_n)[pid[order, 1]]]
@@ -367,8 +368,3 @@ def _box(atoms):
     box, per = check_cell(atoms.cell.array, atoms.pbc)
     return np.ascontiguousarray(box, dtype=np.float64), np.ascontiguousarray(per, dtype=np.bool_)
 
-
-def _min_image_np(d, box_c, periodic_c):
-    for a in range(3):
-        if periodic_c[a]:
-            d[:, a] -= box_c[a] * np.floor(d[:, a] / box_c[a] + 0.5)

@@ -81,3 +81,32 @@ def take_forces(f_nc, idx, out_c):
         for d in range(3):
             out_c[d] += f_nc[i, d]
             f_nc[i, d] = 0.0
+
+
+@njit(cache=True)
+def set_momenta_along(p_nc, m_n, idx, n_c, u):
+    """p[i] = (p[i] - (p[i].n) n) + (m[i] u) n for i in idx: the momentum along the unit
+    vector n set to m u, the rest kept (a piston with free lateral motion).  Along a
+    Cartesian axis the set component is m u exactly and the others are untouched."""
+    for q in range(idx.shape[0]):
+        i = idx[q]
+        pn = p_nc[i, 0] * n_c[0] + p_nc[i, 1] * n_c[1] + p_nc[i, 2] * n_c[2]
+        mu = m_n[i] * u
+        for d in range(3):
+            p_nc[i, d] = (p_nc[i, d] - pn * n_c[d]) + mu * n_c[d]
+
+
+@njit(cache=True)
+def take_forces_along(f_nc, idx, n_c, out_c):
+    """out = sum over idx of (f[i].n) n, then f[i] -= (f[i].n) n (the reaction along n of a
+    piston with free lateral motion; the forces across n stay on the particles)."""
+    s = 0.0
+    for q in range(idx.shape[0]):
+        i = idx[q]
+        fn = f_nc[i, 0] * n_c[0] + f_nc[i, 1] * n_c[1] + f_nc[i, 2] * n_c[2]
+        s += fn
+        for d in range(3):
+            f_nc[i, d] -= fn * n_c[d]
+    out_c[0] = s * n_c[0]
+    out_c[1] = s * n_c[1]
+    out_c[2] = s * n_c[2]

@@ -8,8 +8,11 @@ mixes with ASE's constraints (``FixAtoms``).
 
 * :class:`Piston` -- a layer of particles moving rigidly at a prescribed
   velocity history U(t) in any direction: a constant, a piecewise-linear
-  :class:`Table` (also read from a CSV file) or a Python callable.  A held
-  layer (particles at rest) is ``Piston(indices, 0.0)``.
+  :class:`Table` (also read from a CSV file), a :class:`SmoothRamp` or a
+  Python callable.  A held layer (particles at rest) is
+  ``Piston(indices, 0.0)``.  ``lateral="free"`` prescribes only the velocity
+  along the piston's direction (a grip that lets its particles move across
+  it, as in a uniaxial test).
 * :class:`Wall` -- a planar rigid wall with any normal, as a smooth
   repulsive force on the particles (LAMMPS' ``fix wall/region ... harmonic``
   law), frictionless or sticking.
@@ -32,7 +35,8 @@ Where U(t) is evaluated
 In the step from t_n to t_{n+1} = t_n + dt the layer drifts with the mean
 of U over the step, ``(X(t_{n+1}) - X(t_n))/dt`` with X the integral of U
 (exact for a :class:`Table`, the midpoint value U(t_n + dt/2) for a
-callable, which is exact for a linear ramp), so the layer's displacement is
+callable, which is exact for a linear ramp; exact for a :class:`SmoothRamp`),
+so the layer's displacement is
 the integral of U to rounding.  After the forces at the new positions the
 layer's momenta hold ``m U(t_{n+1})`` (what the kinetic energy and damping
 see at the step's end).  Before the first and after the last time of a
@@ -81,9 +85,10 @@ from numba import njit
 
 from .. import units
 from ..errors import InputError, InstabilityError
-from ._integrate import set_momenta, take_forces
+from ._integrate import set_momenta, set_momenta_along, take_forces, take_forces_along
 
-__all__ = ["Constant", "Table", "Function", "Drive", "Piston", "Wall", "Traction", "from_state"]
+__all__ = ["Constant", "Table", "SmoothRamp", "Function", "Drive", "Piston", "Wall", "Traction",
+           "from_state"]
 
 
 # -- velocity (and stress) histories ----------------------------------------------------------
@@ -264,6 +269,79 @@ class Table:
         return f"Table({self.times.size} points, t = {self.times[0]:.6g}..{self.times[-1]:.6g})"
 
 
+class SmoothRamp:
+    """A history rising from 0 to ``value`` over ``ramp_time`` with zero slope at both ends, then held.
+
+    .. math::  U(t) = U_1 \\tfrac12 \\left(1 - \\cos\\frac{\\pi t}{t_r}\\right),\\ 0 \\le t < t_r;
+               \\qquad U(t) = U_1,\\ t \\ge t_r;\\qquad U(t) = 0,\\ t < 0
+
+    (a half cosine: the load starts without a jerk, so a quasi-static test
+    launches no stress wave from its start).  ``mean(t0, t1)`` is the exact
+    integral over the interval divided by its length, so a layer driven by it
+    is displaced by exactly the integral of U.
+
+    Parameters
+    ----------
+    value : float or (3,) array
+        U_1, the value after the ramp (e.g. Angstrom/ASE-time).
+    ramp_time : float
+        t_r, ASE time, >= 0 (0: a step to ``value`` at t = 0).
+    """
+
+    law = "smooth_ramp"
+
+    def __init__(self, value, ramp_time):
+        self.value = _value(value, "value")
+        try:
+            tr = float(ramp_time)
+        except (TypeError, ValueError):
+            raise InputError("ramp_time", ramp_time, "a time >= 0 (ASE units)") from None
+        if not (tr >= 0 and math.isfinite(tr)):
+            raise InputError("ramp_time", ramp_time, "a time >= 0 (ASE units)")
+        self.ramp_time = tr
+
+    def fraction(self, t):
+        """U(t) / U_1: 0 before t = 0, the half cosine up to ramp_time, 1 after."""
+        tr = self.ramp_time
+        if t >= tr:
+            return 1.0
+        if t <= 0:
+            return 0.0
+        return 0.5 * (1.0 - math.cos(math.pi * t / tr))
+
+    def at(self, t):
+        return self.value * self.fraction(t)
+
+    def _mean_fraction(self, t0, t1):
+        tr = self.ramp_time
+        if t0 >= tr:
+            return 1.0
+        if t1 <= 0.0:
+            return 0.0
+        if t0 < 0.0 or t1 > tr:                   # split at the ends of the ramp
+            a, b = max(t0, 0.0), min(t1, tr)
+            return (self._mean_fraction(a, b) * (b - a) + max(t1 - tr, 0.0)) / (t1 - t0)
+        # mean of (1 - cos(pi t/tr))/2 over [t0, t1], written without cancellation:
+        # sin(a1) - sin(a0) = 2 cos(a_mid) sin(h), h = (a1 - a0)/2
+        h = 0.5 * math.pi * (t1 - t0) / tr
+        am = 0.5 * math.pi * (t0 + t1) / tr
+        return 0.5 * (1.0 - math.cos(am) * (math.sin(h) / h if h > 0 else 1.0))
+
+    def mean(self, t0, t1):
+        if t1 == t0:
+            return self.at(t0)
+        return self.value * self._mean_fraction(t0, t1)
+
+    def max_abs(self):
+        return float(np.linalg.norm(self.value))
+
+    def get_state(self):
+        return {"law": "smooth_ramp", "value": self.value.copy(), "ramp_time": float(self.ramp_time)}
+
+    def __repr__(self):
+        return f"SmoothRamp({self.value.tolist()}, ramp_time={self.ramp_time:.6g})"
+
+
 class Function:
     """A history given by a Python callable ``f(t) -> value`` (t in ASE time).
 
@@ -297,8 +375,9 @@ class Function:
 
 
 def as_history(value, name):
-    """A history from a number, 3-vector, :class:`Table`, :class:`Constant`, :class:`Function` or callable."""
-    if isinstance(value, (Constant, Table, Function)):
+    """A history from a number, 3-vector, :class:`Table`, :class:`Constant`, :class:`SmoothRamp`,
+    :class:`Function` or callable."""
+    if isinstance(value, (Constant, Table, SmoothRamp, Function)):
         return value
     if callable(value):
         return Function(value)
@@ -314,7 +393,9 @@ def history_from_state(d):
         return Constant(d["value"])
     if law == "table":
         return Table(d["times"], d["values"])
-    raise InputError("history law", law, "'constant' or 'table'")
+    if law == "smooth_ramp":
+        return SmoothRamp(d["value"], d["ramp_time"])
+    raise InputError("history law", law, "'constant', 'table' or 'smooth_ramp'")
 
 
 def _history_describe(h, scale, unit):
@@ -324,6 +405,9 @@ def _history_describe(h, scale, unit):
     if isinstance(h, Table):
         return {"law": "piecewise linear in t, held at the end values outside the table",
                 "t_ns": (h.times / units.ns).tolist(), f"value_{unit}": (h.values / scale).tolist()}
+    if isinstance(h, SmoothRamp):
+        return {"law": "half-cosine ramp from 0 to the value over the ramp time, then held",
+                "ramp_time_ns": h.ramp_time / units.ns, f"value_{unit}": (h.value / scale).tolist()}
     return {"law": "callable (not stored)", "callable": getattr(h.f, "__name__", repr(h.f))}
 
 
@@ -597,31 +681,60 @@ class Piston(_Layer):
     step the layer drifts with the mean of U over the step (see the module
     docstring).  ``Piston(indices, 0.0)`` holds a layer at rest.
 
+    With ``lateral="free"`` only the velocity along ``direction`` is
+    prescribed (a grip): each particle of the layer keeps its own velocity
+    across ``direction``, which the forces change as for any particle; only
+    the force components along ``direction`` are taken (and recorded), and
+    the layer drifts along ``direction`` with the mean of U.  ``"fixed"``
+    (the default) prescribes the whole velocity (``U`` along ``direction``,
+    zero across it, or the vector U).
+
     Parameters
     ----------
     indices : array of int or bool mask
         Particles of the layer (rows of the Atoms).
-    velocity : float, (3,) array, Table, Function or callable
+    velocity : float, (3,) array, Table, SmoothRamp, Function or callable
         U(t) in Angstrom/ASE-time: a number (speed along ``direction``), a
         3-vector, a :class:`Table` (of speeds along ``direction`` or of
-        3-vectors; e.g. ``Table.read_csv("u.csv")``), or a callable
-        ``t -> speed or 3-vector`` (not storable in checkpoints).
+        3-vectors; e.g. ``Table.read_csv("u.csv")``), a :class:`SmoothRamp`, or
+        a callable ``t -> speed or 3-vector`` (not storable in checkpoints).
+        With ``lateral="free"`` a speed along ``direction`` (vectors refused).
     direction : (3,) array, default (1, 0, 0)
         Direction of scalar speeds (normalised); ignored for vector values.
+    lateral : "fixed" or "free", default "fixed"
+        Whether the velocity across ``direction`` is prescribed too (zero) or
+        left to the forces, particle by particle.
     """
 
     kind = "Piston"
+    LATERAL = ("fixed", "free")
 
-    def __init__(self, indices, velocity, direction=(1.0, 0.0, 0.0)):
+    def __init__(self, indices, velocity, direction=(1.0, 0.0, 0.0), lateral="fixed"):
         super().__init__(indices)
         self.direction = _unit(direction, "direction")
+        if lateral not in self.LATERAL:
+            raise InputError("lateral", lateral, "'fixed' (the whole velocity prescribed) or 'free' (only the "
+                             "velocity along direction)")
+        self.lateral = lateral
         self.history = as_history(velocity, "velocity")
+        if lateral == "free":
+            vec = (isinstance(self.history, (Constant, SmoothRamp)) and self.history.value.shape != ()) or \
+                  (isinstance(self.history, Table) and self.history.values.ndim != 1)
+            if vec:
+                raise InputError("velocity", velocity, "a speed along direction (numbers) for lateral='free'")
         self._const = self._vec(self.history.value) if isinstance(self.history, Constant) else None
+
+    @property
+    def free(self):
+        """True when only the velocity along :attr:`direction` is prescribed."""
+        return self.lateral == "free"
 
     def _vec(self, u):
         u = np.asarray(u, dtype=float)
         if u.ndim == 0:
             return self.direction * float(u) + 0.0        # + 0.0: no negative zeros
+        if self.free:
+            raise InputError("velocity", u.tolist(), "a speed along direction (a number) for lateral='free'")
         return u + 0.0
 
     def _v_end(self, t):
@@ -644,6 +757,52 @@ class Piston(_Layer):
         """U(t), (3,) Angstrom/ASE-time."""
         return self._v_end(t)
 
+    def adjust_momenta(self, atoms, momenta):
+        if not self.free:
+            return super().adjust_momenta(atoms, momenta)
+        v = self._v_drift() if self._in_drift() else self._v_end(self.time)
+        u = float(np.dot(v, self.direction))
+        m = _masses(atoms)
+        if _is_f64(momenta) and m.dtype == np.float64:
+            set_momenta_along(momenta, m, self.index, self.direction, u)
+        else:
+            p = np.asarray(momenta[self.index], dtype=float)
+            n = self.direction
+            momenta[self.index] = (p - (p @ n)[:, None] * n[None, :]) + (m[self.index] * u)[:, None] * n[None, :]
+
+    def adjust_positions(self, atoms, new):
+        if not self.free:
+            return super().adjust_positions(atoms, new)
+        d = self._dyn
+        if d is None:
+            self._unbound_positions()
+            return
+        n = self.direction
+        old = atoms.positions[self.index]
+        step = new[self.index] - old
+        across = step - (step @ n)[:, None] * n[None, :]
+        if self._step_of == d.nsteps and self._drifted:       # moved along n already in this step
+            new[self.index] = old + across
+            return
+        if not self._in_drift():
+            self.begin_step()
+        m = _masses(atoms)[self.index, None]
+        u = float(np.dot(self._v_drift(), n))
+        new[self.index] = old + across + d.dt * ((m * u) * (1.0 / m)) * n[None, :]
+        self.end_drift()
+
+    def _take(self, forces):
+        if not self.free:
+            return super()._take(forces)
+        R = np.empty(3)
+        if _is_f64(forces):
+            take_forces_along(forces, self.index, self.direction, R)
+        else:
+            f = np.ascontiguousarray(forces[self.index], dtype=float)
+            take_forces_along(f, np.arange(len(self.index), dtype=np.int64), self.direction, R)
+            forces[self.index] = f
+        return R
+
     def adjust_forces(self, atoms, forces):
         R = self._take(forces)
         t = self.time
@@ -651,13 +810,16 @@ class Piston(_Layer):
         if how != "skip":
             self._commit(how, t, R, -float(np.dot(R, self._v_end(t))))
 
+    def get_removed_dof(self, atoms):
+        return len(self.index) if self.free else 3 * len(self.index)
+
     def max_speed(self):
         m = self.history.max_abs()
         return m
 
     def get_state(self):
         return {"kind": "Piston", "index": self.index.copy(), "direction": self.direction.copy(),
-                "history": self.history.get_state(), **self._records_state()}
+                "history": self.history.get_state(), "lateral": self.lateral, **self._records_state()}
 
     @classmethod
     def _from_state(cls, d):
@@ -665,7 +827,7 @@ class Piston(_Layer):
             h = history_from_state(d["history"])
         else:                                  # files written before U(t): a constant velocity
             h = Constant(d["velocity"])
-        p = cls(d["index"], h, d.get("direction", (1.0, 0.0, 0.0)))
+        p = cls(d["index"], h, d.get("direction", (1.0, 0.0, 0.0)), lateral=str(d.get("lateral", "fixed")))
         p._restore_records(d)
         return p
 
@@ -673,13 +835,17 @@ class Piston(_Layer):
         d = {"kind": "Piston", "n_particles": int(self.index.size),
              "direction": self.direction.tolist(),
              "velocity": _history_describe(self.history, units.km_s, "km_s"),
+             "lateral": self.lateral + (" (only the velocity along direction prescribed)" if self.free else
+                                        " (the whole velocity prescribed)"),
              "evaluated": "layer drifts with the mean of U over each step; momenta at step ends hold U(t)",
              "impulse_N_s": (self.impulse / (units.N * units.s)).tolist(),
              "work_J": float(self.work / units.J)}
         return d
 
     def __repr__(self):
-        return f"Piston({len(self.index)} particles, velocity={self.history!r}, direction={self.direction.tolist()})"
+        lat = ", lateral='free'" if self.free else ""
+        return (f"Piston({len(self.index)} particles, velocity={self.history!r}, "
+                f"direction={self.direction.tolist()}{lat})")
 
 
 class Traction(_Layer):

@@ -1,18 +1,17 @@
 """Scene framework: parameters with units, result records, the registry.
 
-A scene is a ready experiment.  It declares its parameters (name, default,
-unit, allowed range), builds only the physics it needs, runs, and returns a
-:class:`SceneResult`: measured quantities with units, each next to its
-reference and relative error, plus the wall time.  The CLI prints it and
-writes it as JSON beside the H5MD file.
+A scene is a ready experiment: a :class:`~clusterdyn.scenes.lifecycle.SceneDef`
+registered with :func:`register_scene`.  It declares its parameters (name,
+default, unit, allowed range), builds only the physics it needs, runs through
+the one lifecycle, and returns a :class:`SceneResult`: measured quantities
+with units, each next to its reference and relative error, plus the wall
+time.  The CLI prints it and writes it as JSON beside the H5MD file.
 """
 
-import dataclasses
 import importlib
 import json
 import math
 import re
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -275,51 +274,6 @@ def _jsonable(v):
         return str(v)
 
 
-@dataclass
-class Scene:
-    """A registered scene: name, description, parameters, and ``run(params, out, progress)``."""
-
-    name: str
-    description: str
-    params: list
-    runner: object
-
-    def defaults(self):
-        return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
-
-    def parse(self, overrides):
-        """Defaults updated with ``overrides`` (text or values); unknown keys rejected."""
-        known = {p.name: p for p in self.params}
-        vals = self.defaults()
-        for k, v in (overrides or {}).items():
-            if k not in known:
-                raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
-            vals[k] = known[k].parse(v)
-        return vals
-
-    def display(self, vals):
-        """Parameter values in their display units (for JSON and tables)."""
-        out = {}
-        for p in self.params:
-            v = vals.get(p.name)
-            if p.unit and isinstance(v, float):
-                out[p.name] = {"value": v / units.NAMED[p.unit], "unit": p.unit}
-            else:
-                out[p.name] = v
-        return out
-
-    def run(self, overrides=None, out=None, progress=True, **kw):
-        vals = self.parse(overrides)
-        t0 = time.perf_counter()
-        res = self.runner(vals, out=Path(out) if out else None, progress=progress, **kw)
-        if res.wall_time_s is None:
-            res.wall_time_s = time.perf_counter() - t0
-        res.params = self.display(vals)
-        if out is not None:
-            res.files.append(res.write(out))
-        return res
-
-
 SCENES = {}
 
 
@@ -327,14 +281,6 @@ def register_scene(scene):
     """Register a :class:`~clusterdyn.scenes.lifecycle.SceneDef` instance under its name."""
     SCENES[scene.name] = scene
     return scene
-
-
-def register(name, description, params):
-    """Decorator registering ``runner(vals, out, progress) -> SceneResult`` as a scene."""
-    def deco(fn):
-        SCENES[name] = Scene(name, description, list(params), fn)
-        return fn
-    return deco
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)

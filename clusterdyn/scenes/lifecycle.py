@@ -63,6 +63,8 @@ class Stage:
         Attached to the dynamics for the stage (e.g. a free-surface velocity probe).
     observables : dict, optional
         H5MD observables ``{name: (callable(atoms) -> value, unit)}``.
+    per_particle : dict, optional
+        H5MD per-particle data ``{name: callable(atoms) -> (N, ...) array}``.
     """
 
     name: str
@@ -76,6 +78,7 @@ class Stage:
     observers: list = field(default_factory=list)
     observables: dict = None
     t_run: float = 0.0
+    per_particle: dict = None
 
 
 def check_out(out):
@@ -282,7 +285,8 @@ class SceneDef:
         if out is not None and v.get("h5md", False):
             from ..io import H5MDWriter
             path = self._h5md_path(out, stage.name, nstages)
-            kw = dict(dyn=dyn, parameters=self.display(v), observables=stage.observables or {})
+            kw = dict(dyn=dyn, parameters=self.display(v), observables=stage.observables or {},
+                      per_particle=stage.per_particle or {})
             if dyn.nsteps > 0 and path.exists():
                 writer = H5MDWriter(str(path), stage.atoms, mode="a", restart_step=dyn.nsteps, **kw)
             else:

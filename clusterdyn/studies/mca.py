@@ -55,7 +55,8 @@ from ..scenes.base import Param
 from ..analysis.stress import VOIGT
 from ..build.mca import mca_packing
 from ..mca.calculator import MCA
-from ..mca.dynamics import Grip, MCADynamics
+from ..mca.dynamics import MCADynamics
+from ..md.drives import Piston
 from ..materials.mca import mca_material
 from .common import out_folder, parse_params
 
@@ -68,8 +69,8 @@ def elastic_material(nu, E_GPa=100.0, rho=2.7, response="elastic", **kw):
     return mca_material(f"elastic-nu{nu}", rho, E_GPa, nu, response=response, **kw)
 
 
-def _relax(atoms, steps, damping=0.15, grips=()):
-    dyn = MCADynamics(atoms, damping=damping, grips=grips)
+def _relax(atoms, steps, damping=0.15, hold_layer_rotation=False):
+    dyn = MCADynamics(atoms, damping=damping, hold_layer_rotation=hold_layer_rotation)
     dyn.run(steps)
     return dyn
 
@@ -118,8 +119,9 @@ def shear_modulus(mat, packing, size=5.0, gamma=1e-6, relax=None, seed=0):
     h = y.max() - y.min()
     held = (y < y.min() + 0.6 * d) | (y > y.max() - 0.6 * d)
     if relax:
-        grips = [Grip(held, 0, 0.0, lateral="fixed")]
-        _relax(atoms, relax, grips=grips)
+        atoms.set_constraint(Piston(held, 0.0))            # the faces held at rest, not rotating
+        _relax(atoms, relax, hold_layer_rotation=True)
+        atoms.set_constraint()
     s = atoms.calc.get_property("stresses", atoms)
     om = atoms.calc.state.per_atom("omega_n", atoms)
     mid = np.abs(atoms.positions[:, 1] - ymid) < 0.25 * h

@@ -11,7 +11,7 @@ from clusterdyn.build import fcc_packing, make_cluster_atoms
 from clusterdyn.calculators import ClusterDynamics
 from clusterdyn.errors import InputError, InstabilityError
 from clusterdyn.io.checkpoint import load_run, save_run
-from clusterdyn.md import DampedVerlet, Piston, Table, Traction, Wall, from_state
+from clusterdyn.md import DampedVerlet, Piston, SmoothRamp, Table, Traction, Wall, from_state
 from clusterdyn.scenes.shock import build_shock
 
 R0 = 5 * units.um
@@ -274,6 +274,36 @@ def test_callable_history_cannot_be_saved(tmp_path):
         DampedVerlet(s.atoms, J=None)                                  # no default dt from a callable
 
 
+def test_free_lateral_piston_with_a_smooth_ramp():
+    """``lateral="free"`` (a grip) in the fast path: the layer's speed along the direction is the
+    smooth ramp's, its displacement the ramp's exact integral; across it the layer's particles
+    move under their forces; the record holds only the force along the direction, and the
+    momentum given to the sample along it is the recorded impulse (1e-6)."""
+    T = 60 * build_shock(size=(16, 3, 3), u=U).dyn.dt
+    s, p, dyn = shock_with(SmoothRamp(U, T), J=50)
+    s.atoms.set_constraint(Piston(p.index, SmoothRamp(U, T), lateral="free"))
+    dyn = DampedVerlet(s.atoms, timestep=dyn.dt, J=50)
+    p = s.atoms.constraints[0]
+    mob = np.ones(len(s.atoms), bool)
+    mob[p.index] = False
+    P0 = s.atoms.get_momenta()
+    x0 = s.atoms.positions[p.index].copy()
+    dyn.run(150)
+    t = dyn.get_time()
+    X = 0.5 * U * T + U * (t - T)                           # integral of the ramp from 0 to t
+    np.testing.assert_allclose(s.atoms.positions[p.index, 0] - x0[:, 0], X, rtol=1e-12)
+    v = s.atoms.get_velocities()[p.index]
+    np.testing.assert_allclose(v[:, 0], U, rtol=1e-14)
+    assert np.abs(v[:, 1:]).max() > 0 and np.abs(s.atoms.positions[p.index, 1:] - x0[:, 1:]).max() > 0
+    assert np.all(p.force[1:] == 0.0) and p.force[0] < 0
+    dP = s.atoms.get_momenta() - P0
+    assert abs(dP[mob, 0].sum() / p.impulse[0] - 1) < 1e-6
+    assert np.abs(dP[:, 1:].sum(axis=0)).max() < 1e-9 * abs(p.impulse[0])      # nothing taken across
+    back = from_state(p.get_state())
+    assert back.lateral == "free" and back.history.ramp_time == T and back.history.at(2 * T) == U
+    assert SmoothRamp(U, T).mean(0.0, T) == pytest.approx(0.5 * U, rel=1e-14)
+
+
 def test_state_and_describe_round_trip():
     w = Wall([0, 0, 1.0], [0, 0, 2.0], stiffness=3.0, cutoff=2.0)
     p = Piston([0, 1], Table([0.0, 1.0], [[0, 0, 0], [1.0, 2.0, 0]]))
@@ -314,6 +344,9 @@ def test_table_from_csv(tmp_path):
     (lambda: Traction([0], [1, 0, 0], 1.0, velocity=[1.0, 0, 0]), "velocity"),
     (lambda: Traction([0], [1, 0, 0], 1.0, velocity=2.0), "tangent"),
     (lambda: Wall([0, 0, 0], [1, 0, 0], sticking="yes"), "sticking"),
+    (lambda: Piston([0], 1.0, lateral="sideways"), "lateral"),
+    (lambda: Piston([0], [1.0, 0, 0], lateral="free"), "velocity"),
+    (lambda: SmoothRamp(1.0, -1.0), "ramp_time"),
 ])
 def test_bad_input_refused_in_one_line(make, arg):
     with pytest.raises(InputError) as exc:

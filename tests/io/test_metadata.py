@@ -323,7 +323,7 @@ def test_mca_pair_state_every_frame(tmp_path):
         assert a.info["mca_materials"] == ["alumina"] and a.info["mca_dim"] == 3
         assert r.metadata["calculator"]["class"] == "MCA"
         assert r.metadata["damping"]["damping"] == 0.05
-        assert [c["class"] for c in r.metadata["constraints"]] == ["Grip", "Grip"]
+        assert [c["class"] for c in r.metadata["constraints"]] == ["Piston", "Piston"]
         with pytest.raises(InputError, match="ClusterDynamics"):
             r.calculator()
     with h5py.File(path, "r") as f:

@@ -14,6 +14,10 @@ TINY_IMPACT = ["--set", "sample=both", "--set", "flyer=5", "--set", "target=10",
                "--set", "grain_size=4", "--set", "relax_cycles=1", "--set", "frames=10",
                "--set", "checkpoint_every=3", "--set", "h5md=false"]
 
+#: 8 x 3 x 3 automata pulled to 6 sigma_t/E in 400 steps; the checkpoint at step 200 is mid-crack
+TINY_MCA = ["--set", "size=8x3x3", "--set", "steps=400", "--set", "strain_max=6", "--set", "frames=10",
+            "--set", "checkpoint_every=5"]
+
 
 def _values(path):
     d = json.loads(path.read_text())
@@ -51,6 +55,24 @@ def test_u_history_driven_shock_restart_is_bit_for_bit(tmp_path, capsys):
     assert db["params"]["u_history"] == str(csv)
 
 
+def test_mca_restart_is_bit_for_bit_mid_crack(tmp_path, capsys):
+    from clusterdyn.io.checkpoint import read_checkpoint
+    da, db = _restart_equals_full_run(tmp_path, "mca-tension", TINY_MCA, capsys)
+    _, st = read_checkpoint(tmp_path / "ck.h5")
+    assert st["dynamics"]["nsteps"] == 200
+    assert 0 < int((st["dynamics"]["linked_p"] == 0).sum()) < da["broken_links"]["value"]   # a live crack
+    assert db["params"]["h5md_frames"] == 7 and db["params"]["steps"] == 400
+    capsys.readouterr()
+    for bad in ("steps=800", "frames=20", "material=concrete"):
+        assert main(["run", "mca-tension", "--restart", str(tmp_path / "ck.h5"), "--out", str(tmp_path / "x"),
+                     "--set", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and bad in err and "only keys a continuation can change" in err
+    assert main(["run", "mca-compression", "--restart", str(tmp_path / "ck.h5")]) == 2
+    assert "a checkpoint of scene 'mca-compression' (it is of scene 'mca-tension')" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
 def test_restart_refuses_a_physics_key_and_another_scene(tmp_path, capsys):
     out = tmp_path / "a"
     assert main(["run", "shock", "--quiet", "--out", str(out)] + TINY_SHOCK) == 0
@@ -63,6 +85,9 @@ def test_restart_refuses_a_physics_key_and_another_scene(tmp_path, capsys):
     assert main(["run", "plate-impact", "--restart", str(ck), "--out", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert "a checkpoint of scene 'plate-impact' (it is of scene 'shock')" in err
+    assert main(["run", "mca-tension", "--restart", str(ck), "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "a checkpoint of scene 'mca-tension' (it is of scene 'shock')" in err and "Traceback" not in err
 
 
 BAD = [
@@ -74,6 +99,9 @@ BAD = [
     (["run", "shock", "--set", "axis=w"], "axis='w'"),
     (["run", "shock", "--restart", "/nonexistent/ck.h5"], "an existing checkpoint file"),
     (["run", "nosuchscene"], "scene='nosuchscene'"),
+    (["run", "mca-tension", "--set", "size=4x3x3"], "at least 5 automaton sizes along the bar"),
+    (["run", "mca-compression", "--set", "size=2x3x3"], "size='2x3x3'"),
+    (["run", "mca-tension", "--restart", "/nonexistent/ck.h5"], "an existing checkpoint file"),
     (["study", "nosuchstudy"], "study='nosuchstudy'"),
     (["run", "shock", "--set", "nokey=1"], "--set='nokey'"),
 ]
