@@ -246,9 +246,14 @@ class DustingScene(SceneDef):
         for r in v.get("_retried", []):
             notes.append(f"time step halved after a stop: {r}")
         extra = {"ledger_eV": {k: float(x) for k, x in L.items()}, "n_particles": sm["n"], "n_steps": sm["nsteps"],
-                 "stepping_time_s": sm["t_run"], "spectrum": {"g": sm["spectrum_g"], "N": sm["spectrum_n"]},
+                 "stepping_time_s": sm["t_run"],
+                 "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()},
                  "t_end_us": sm["t_end"] / units.us, "area_um2": info["area"] / units.um ** 2,
-                 "clusters_per_layer": per_layer}
+                 "clusters_per_plane": per_layer, "surface_mm": sm["surface"] / units.mm,
+                 "series": {"t_us": (s["t"] / units.us).tolist(), "per_mm2": s["per_mm2"].tolist(),
+                            "mass_fraction": s["mass_fraction"].tolist(), "fsv_km_s": (s["fsv"] / units.km_s).tolist()},
+                 "layers": {"x_mm": (sm["layers_x"] / units.mm).tolist(), "n": sm["layers_n"].tolist(),
+                            "thickness_r0": v["layer"]}}
         return q, notes, extra
 
     def report(self, v, summaries, result, out):

@@ -18,6 +18,8 @@ stability      the measured time-step limit (bounded energy error) for u = 0-8 k
 mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, hcp,
                sc and random packings) and the Cluster Dynamics contrast
 mca-degrading  a load / unload / reload cycle of a degrading MCA material
+dusting        numerical dusting of a smooth free surface against u, rc, damping
+               and r0 (the CD paper's figs. 18-20)
 =============  =================================================================
 """
 
@@ -37,6 +39,8 @@ STUDIES = {
                        "fcc, hcp, sc and random packings, and the Cluster Dynamics contrast"),
     "mca-degrading": ("mca:degrading_study:DEGRADING_PARAMS", "a load / unload / reload cycle of a degrading "
                       "MCA material"),
+    "dusting": ("dusting:dusting_study:PARAMS", "dispersed clusters of a shocked smooth free surface against u, "
+                "rc, damping and r0 (CD paper figs. 18-20)"),
 }
 
 
