@@ -53,7 +53,8 @@ MEASURED_AL_SPALL_GPA = (1.0, 1.6)
 PARAMS = [
     Param("sample", "both", "single crystal ([100]), polycrystal, or both", kind="choice",
           choices=("single", "polycrystal", "both")),
-    Param("v", 2500.0, "relative impact speed (each plate moves at v/2)", unit="m/s", low=0.0, high=8000.0,
+    Param("v", 2300.0, "relative impact speed (each plate moves at v/2); the single crystal spalls from 2300",
+          unit="m/s", low=0.0, high=8000.0,
           low_open=True),
     Param("r0", 10.0, "cluster size", unit="um", low=0.0, low_open=True),
     Param("flyer", 20.0, "flyer thickness, in r0", low=4.0),

@@ -143,7 +143,8 @@ def _row(res, err, wall, u, rc, J, seed, r0):
                 "ledger": q["ledger_residual"].value, "n_particles": x.get("n_particles"),
                 "n_steps": x.get("n_steps"), "stepping_s": x.get("stepping_time_s"),
                 "spectrum": " ".join(str(n) for n in x.get("spectrum", {}).get("N", [])),
-                "layers": x.get("layers"), "series": x.get("series"), "surface_mm": x.get("surface_mm")})
+                "layers": x.get("layers"), "series": x.get("series"), "surface_mm": x.get("surface_mm"),
+                "per_plane_mm2": x.get("clusters_per_plane", 0) / (x.get("area_um2", float("inf")) * 1e-6)})
     return row
 
 
@@ -295,7 +296,9 @@ def _plot_counts(path, summary, rows, v):
                         label=f"{lab}: mean +- std over seeds")
             pts = [r for r in rows if r["rc"] == rc and r["J"] == J and r.get("per_mm2") is not None]
             ax.plot([r["u"] for r in pts], [r["per_mm2"] for r in pts], ".", color=f"C{k}", alpha=0.5, ms=5)
-        ax.axhline(8 / 8e-4, color="gray", ls=":", lw=0.8, label="one monolayer (8 clusters / 8e-4 mm^2)")
+        mono = [r["per_plane_mm2"] for r in rows if r.get("per_plane_mm2")]
+        if mono:
+            ax.axhline(mono[0], color="gray", ls=":", lw=0.8, label="one monolayer (one (200) plane)")
         ax.set_xlabel("particle velocity u (km/s)")
         ax.set_ylabel("dispersed clusters per mm^2")
         ax.set_title(f"rc = {rc:g} (CD paper fig. {18 if rc < 1.15 else 19})")
@@ -308,24 +311,35 @@ def _plot_counts(path, summary, rows, v):
 
 
 def _plot_layers(path, prof, v):
+    """Clusters per layer at the end without and with damping (the CD paper's fig. 20): the whole
+    sample, and the rear surface with the dispersed clusters beyond it."""
     from ..scenes.common import matplotlib_agg
     plt = matplotlib_agg()
-    fig, axs = plt.subplots(1, len(prof), figsize=(6 * len(prof), 4), squeeze=False)
+    fig, axs = plt.subplots(1, 2, figsize=(13, 4.2))
     rows = []
-    for ax, (J, r) in zip(axs[0], prof.items()):
+    for k, (J, r) in enumerate(prof.items()):
         L = r.get("layers")
         if not L:
             continue
         x, n = np.asarray(L["x_mm"]), np.asarray(L["n"])
-        ax.step(x, n, where="mid", lw=0.9)
-        if r.get("surface_mm") is not None:
-            ax.axvline(r["surface_mm"], color="r", lw=0.6, ls="--", label="main body's rear surface")
-        ax.set_xlabel("x (mm)")
-        ax.set_ylabel(f"clusters per layer ({L['thickness_r0']:g} r0)")
-        lab = "no damping" if J == "none" else f"J = {J}"
-        ax.set_title(f"{lab}: u = {r['u']:g} km/s, rc = 1.1, t = end, {r.get('clusters')} dispersed")
-        ax.legend(fontsize=7)
+        lab = ("no damping" if J == "none" else f"J = {J}") + f": {r.get('clusters')} dispersed"
+        for ax in axs:
+            ax.step(x, n, where="mid", lw=0.9, color=f"C{k}", label=lab)
+            if r.get("surface_mm") is not None:
+                ax.axvline(r["surface_mm"], color=f"C{k}", lw=0.6, ls="--")
         rows += [{"J": J, "x_mm": a, "clusters": int(b)} for a, b in zip(x, n)]
+    surf = [r["surface_mm"] for r in prof.values() if r.get("surface_mm") is not None]
+    xmax = max((max(r["layers"]["x_mm"]) for r in prof.values() if r.get("layers")), default=None)
+    if surf and xmax is not None:
+        axs[1].set_xlim(min(surf) - 0.25, max(xmax, max(surf)) + 0.05)
+    r0 = next((r for r in prof.values() if r.get("layers")), None)
+    thick = r0["layers"]["thickness_r0"] if r0 else 0
+    for ax, title in zip(axs, ("whole sample", "rear surface (dashed: main body's surface)")):
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel(f"clusters per layer ({thick:g} r0 thick)")
+        ax.set_title(f"u = {v['profile_u'] / units.km_s:g} km/s, rc = 1.1, end of run: {title}", fontsize=9)
+        ax.set_ylim(bottom=0)
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
