@@ -217,6 +217,7 @@ def dusting_study(overrides=None, out=None, progress=True, quiet=None):
     if v["plots"]:
         files.append(_plot_counts(folder / "dusting_count_vs_u.png", summary, sweep_rows, v))
         files += _plot_layers(folder / "dusting_layers.png", prof, v)
+        files += _plot_series(folder / "dusting_time.png", rows, v, r0_um)
         if res_rows:
             files.append(_plot_resolution(folder / "dusting_resolution.png", res_rows))
     result = {"study": "dusting", "length_mm": v["length"] / units.mm, "r0_um": r0_um, "runs": plain,
@@ -344,6 +345,40 @@ def _plot_layers(path, prof, v):
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return [path, write_csv(Path(path).with_suffix(".csv"), rows)]
+
+
+def _plot_series(path, rows, v, r0_um):
+    """Dispersed clusters per mm^2, mass fraction and free-surface velocity against time at u =
+    profile_u, rc = 1.1, every seed, without and with damping (CSV beside)."""
+    from ..scenes.common import matplotlib_agg
+    plt = matplotlib_agg()
+    u = _k(v["profile_u"] / units.km_s)
+    fig, axs = plt.subplots(1, 2, figsize=(13, 4.2))
+    out = []
+    for (key, r) in rows.items():
+        if key[0] != u or key[1] != 1.1 or key[4] != r0_um or not r.get("series"):
+            continue
+        s = r["series"]
+        c = "C0" if r["J"] == "none" else "C1"
+        lab = ("no damping" if r["J"] == "none" else f"J = {r['J']}") + f", seed {r['seed']}"
+        ls = ("-", "--", ":", "-.")[int(r["seed"]) % 4]
+        axs[0].plot(s["t_us"], s["per_mm2"], ls, color=c, lw=1, label=lab)
+        axs[1].plot(s["t_us"], s["fsv_km_s"], ls, color=c, lw=1, label=lab)
+        out += [{"J": r["J"], "seed": r["seed"], "t_us": t, "per_mm2": n, "mass_fraction": m, "fsv_km_s": f}
+                for t, n, m, f in zip(s["t_us"], s["per_mm2"], s["mass_fraction"], s["fsv_km_s"])]
+    axs[0].set_xlabel("t (us)")
+    axs[0].set_ylabel("dispersed clusters per mm^2 (mass fraction in the CSV)")
+    axs[0].set_title(f"u = {u:g} km/s, rc = 1.1: dispersed clusters against time", fontsize=9)
+    axs[1].set_xlabel("t (us)")
+    axs[1].set_ylabel("free-surface velocity (km/s)")
+    axs[1].set_title("rear free surface (clusters that started within 3 r0 of it)", fontsize=9)
+    for ax in axs:
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return [path, write_csv(Path(path).with_suffix(".csv"), out)]
 
 
 def _plot_resolution(path, rows):
