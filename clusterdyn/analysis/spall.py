@@ -139,6 +139,12 @@ def spall_strength(rho0, c, du):
 class LagrangianMap:
     """Longitudinal virial stress per rest volume, binned by the particles' initial positions.
 
+    Each :meth:`add` stores, per bin, ``sum_i W_i,aa / sum_i V_i`` (W the
+    particles' potential virials, tension positive, eV/Angstrom^3): the
+    stress of the material that started in the bin, per rest volume (it
+    differs from the Cauchy stress by the bin's compression; the fronts'
+    positions and speeds do not depend on it).
+
     Parameters
     ----------
     x0 : (N,) array, Angstrom
@@ -148,12 +154,7 @@ class LagrangianMap:
     volume : (N,) array or float, Angstrom^3
         Rest volume of each particle (``r0^3 / sqrt 2`` for clusters).
     axis : int, default 0
-
-    Each :meth:`add` stores, per bin, ``sum_i W_i,aa / sum_i V_i`` (W the
-    particles' potential virials, tension positive, eV/Angstrom^3): the
-    stress of the material that started in the bin, per rest volume (it
-    differs from the Cauchy stress by the bin's compression; the fronts'
-    positions and speeds do not depend on it).
+        Direction of the material coordinate.
     """
 
     def __init__(self, x0, width, volume, axis=0):
