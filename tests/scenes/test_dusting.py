@@ -104,3 +104,21 @@ def test_dusting_restart_is_bit_for_bit(tmp_path):
     vals = [k for k, x in a.items() if isinstance(x, dict) and "value" in x]
     assert vals and all(a[k]["value"] == b[k]["value"] for k in vals)
     assert a["extra"]["series"] == b["extra"]["series"]
+
+
+def test_dusting_study_tiny_resumes_from_its_runs(tmp_path):
+    from clusterdyn.studies import get_study
+    args = {"length": "0.25mm", "us": "1,4", "rcs": "1.1", "Js": "none", "seeds": "1,2", "r0s": "none",
+            "frames": "8", "plots": "false", "profile_u": "4"}
+    res = get_study("dusting")(args, out=tmp_path, progress=False)
+    assert len(res["runs"]) == 4 and {r["u"] for r in res["runs"]} == {1.0, 4.0}
+    assert all(abs(r["ledger"]) < 1e-3 for r in res["runs"])
+    sweep = {(r["u"], r["J"]): r for r in res["sweep"]}
+    assert sweep[(4.0, "none")]["n"] == 2 and sweep[(4.0, "none")]["per_mm2_mean"] > 0
+    # a second call reads every run back from OUT/runs (same numbers, no new run folders)
+    folders = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    again = get_study("dusting")(args, out=tmp_path, progress=False)
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == folders
+    assert [r["per_mm2"] for r in again["runs"]] == [r["per_mm2"] for r in res["runs"]]
+    for f in ("dusting_runs.csv", "dusting_sweep.csv", "dusting.json"):
+        assert (tmp_path / f).exists()
