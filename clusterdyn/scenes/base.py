@@ -284,7 +284,7 @@ def register_scene(scene):
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact", "mca"]
+SCENE_MODULES = ["shock", "plate_impact", "mca", "dusting", "spall"]
 
 
 def all_scenes():

@@ -208,8 +208,10 @@ class ImpactRecord:
         self.fsv_v.append(u + 0.5 * self.v)                 # target rest frame
 
     def frame(self, d):
+        """Profile the current frame; returns the particles' potential virials (N, 6), eV."""
         out = self.atoms.calc.compute(self.atoms, per_particle=True)
         self.rec.add(self.atoms, out["virials"], d.get_time())
+        return out["virials"]
 
     def get_state(self):
         return {"profiles": self.rec.get_state(), "fsv_t": list(self.fsv_t), "fsv_v": list(self.fsv_v)}
@@ -218,6 +220,15 @@ class ImpactRecord:
         self.rec.set_state(st["profiles"])
         self.fsv_t = [float(x) for x in st["fsv_t"]]
         self.fsv_v = [float(x) for x in st["fsv_v"]]
+
+
+def impact_info(s):
+    """The encodable set-up facts of a :func:`build_impact` dict (what the analysis and a restart need)."""
+    info = {k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer", "target", "width", "sample", "c0")}
+    info["rear"] = np.nonzero(s["rear"])[0]
+    info["reports"] = [r if r is not None else {} for r in s["reports"]]
+    info["relax"] = s["relax"] if s["relax"] is not None else {}
+    return info
 
 
 def impact_duration(info, duration=None):
@@ -523,10 +534,7 @@ class PlateImpactScene(SceneDef):
         s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
                          v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
                          boundaries=v["boundaries"])
-        info = {k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer", "target", "width", "sample", "c0")}
-        info["rear"] = np.nonzero(s["rear"])[0]
-        info["reports"] = [r if r is not None else {} for r in s["reports"]]
-        info["relax"] = s["relax"] if s["relax"] is not None else {}
+        info = impact_info(s)
         info["nsteps"] = int(math.ceil(impact_duration(info, v["duration"]) / s["dt"]))
         return s["atoms"], s["dyn"], info
 
