@@ -2,6 +2,7 @@
 
     python benchmarks/shock_length.py record --u 3 --cells 300          # one long run, frames saved
     python benchmarks/shock_length.py analyse                           # every recorded run
+    python benchmarks/shock_length.py rule                              # the size=auto rule against them
 
 ``record`` runs the aluminium piston shock (defaults of the ``shock`` scene:
 [100], damping off, 10 m/s noise) on a long sample with many frames and
@@ -12,7 +13,10 @@ a shorter run would stop are that shorter run (up to the noise realisation).
 ``analyse`` replays each recorded run cut to shorter lengths through the
 scene's own analysis (:meth:`ShockTracker.result` with the fit window the
 scene uses) and prints, per u and length, D, the steadiness verdict and its
-reasons; it writes ``results/shock_length.md``/``.json``.
+reasons.  ``rule`` checks the scene's ``AUTO_RULE`` against the recordings
+(the transient skipped, the shortest length from which every longer cut is
+steady, D at the rule's length and on the longest record) and writes
+``results/shock_length.md``/``.json``.
 """
 
 import argparse
@@ -94,6 +98,53 @@ def analyse(lengths=None, skip=None, **kw):
     return rows
 
 
+def rule_table(lengths=(40, 60, 80, 100, 120, 140, 160, 180, 200, 250, 300, 350, 400, 500, 600)):
+    """The scene's AUTO_RULE against every recording (one row per recorded u, the longest record)."""
+    from clusterdyn.scenes.shock import AUTO_RULE, shock_size
+    recs = {}
+    for path in sorted(STORE.glob("Al_*.pkl")):
+        rec = pickle.loads(path.read_bytes())
+        if rec["u"] not in recs or rec["cells"] > recs[rec["u"]]["cells"]:
+            recs[rec["u"]] = rec
+    rows = []
+    for u, rec in sorted(recs.items()):
+        (L, _, _), fit_r0 = shock_size(u * units.km_s)
+        skip = fit_r0 / math.sqrt(2.0)
+        ref = hugoniot(rec["material"]).D(u * units.km_s) / units.km_s
+        cuts = sorted({c for c in lengths if c <= rec["cells"]} | {rec["cells"], L} - {c for c in () })
+        cuts = [c for c in cuts if c <= rec["cells"]]
+        res = {c: cut(rec, c, skip)[0] for c in cuts}
+        steady_from = None
+        for c in reversed(cuts):
+            if not res[c].steady:
+                break
+            steady_from = c
+        at = res.get(L)
+        longest = res[rec["cells"]]
+        rows.append({"u": u, "skip_cells": skip, "length_cells": L, "recorded_cells": rec["cells"],
+                     "steady_from_cells": steady_from, "margin": L / steady_from if steady_from else None,
+                     "D_rule": at.D_fit / units.km_s if at else None, "steady_rule": at.steady if at else None,
+                     "reasons_rule": at.steady_reasons if at else None,
+                     "D_longest": longest.D_fit / units.km_s, "steady_longest": longest.steady,
+                     "D_ref": ref, "err_rule": (at.D_fit / units.km_s / ref - 1) if at else None,
+                     "err_longest": longest.D_fit / units.km_s / ref - 1,
+                     "u_ratio_rule": at.u / at.u_piston if at else None})
+    lines = ["| u km/s | transient skipped (cells) | auto length (cells) | recorded (cells) | steady from (cells) "
+             "| margin | D at auto length | steady | err vs Al-1100 | D longest | err longest |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['u']:g} | {r['skip_cells']:.0f} | {r['length_cells']} | {r['recorded_cells']} | "
+                     f"{r['steady_from_cells'] or '-'} | {r['margin'] or 0:.2f} | "
+                     f"{r['D_rule'] if r['D_rule'] is None else format(r['D_rule'], '.3f')} | "
+                     f"{'yes' if r['steady_rule'] else 'NO'} | "
+                     f"{r['err_rule'] if r['err_rule'] is None else format(r['err_rule'], '+.2%')} | "
+                     f"{r['D_longest']:.3f} | {r['err_longest']:+.2%} |")
+    md = "\n".join(lines) + "\n"
+    (HERE / "results" / "shock_length.md").write_text(md)
+    (HERE / "results" / "shock_length.json").write_text(json.dumps(rows, indent=1, default=float))
+    return rows, md
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -109,7 +160,11 @@ def main(argv=None):
     a_.add_argument("--run-fraction", type=float, default=None)
     a_.add_argument("--skip", type=float, default=None, help="fit from the front at this many cells on")
     a_.add_argument("--u", type=float, default=None, help="only this piston speed")
+    sub.add_parser("rule")
     a = ap.parse_args(argv)
+    if a.cmd == "rule":
+        print(rule_table()[1])
+        return
     if a.cmd == "record":
         for u, c in zip(a.u, a.cells):
             record(u, c, a.across, a.frames, a.seed)
