@@ -1,6 +1,6 @@
 """Shock analysis: binned profiles along the shock direction, front tracking, the state behind the front.
 
-Conventions (physics.md 1.4-1.5): stresses are tension-positive; the
+Conventions (docs/theory.md 1.4-1.5): stresses are tension-positive; the
 longitudinal stress behind the front is ``P = -sigma_xx`` with the virial
 and kinetic parts (kinetic part about the bin's mean velocity).  D is the
 lab-frame speed of the front into material at rest.
@@ -70,7 +70,7 @@ def fit_front(times, fronts):
     return float(D), float(x0), float(np.sqrt(np.mean(res ** 2)))
 
 
-#: A run is steady when (physics.md 1.5, docs/hugoniot.md) the front position is linear in
+#: A run is steady when (docs/theory.md 1.5, docs/hugoniot.md) the front position is linear in
 #: time -- rms residual of the line at most STEADY_FIT_RMS slab widths and D from the first and
 #: second half of the fit window within STEADY_D_HALVES of each other -- and the mean particle
 #: velocity behind the front is within STEADY_U_TOL of the piston speed.
@@ -421,7 +421,7 @@ def hugoniot_interpolant(u, D):
 
 
 def mixture_D(u, phases, closure="equal_u"):
-    """Shock speed of a mixture at particle velocity ``u`` (Kuropatenko's rule, physics.md 1.6).
+    """Shock speed of a mixture at particle velocity ``u`` (Kuropatenko's rule, docs/theory.md 1.6).
 
     .. math::
 

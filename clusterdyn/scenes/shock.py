@@ -149,11 +149,13 @@ def suggest_size(u, size, direction="100"):
 
 PARAMS = [
     Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
-    Param("u", 3.0, "piston speed", unit="km/s", low=0.0, high=U_MAX, low_open=True),
+    Param("u", 3.0, "piston speed (the top of the range is the fastest speed whose steady sample length "
+          "was measured, AUTO_RULE)", unit="km/s", low=0.0, high=U_MAX, low_open=True),
     Param("direction", "100", "crystal direction along the shock", kind="choice",
           choices=("100", "110", "111")),
     SampleSize("repeat cells along the shock and across it (the first along the shock); auto: the sample "
-               "length that is steady at u (shock_size; measured on aluminium), 6x6 cells across"),
+               "length that is steady at u (100-300 [100] cells, measured on aluminium; shock_size), 6x6 cells "
+               "across; autoxNYxNZ: that length with the given cross-section"),
     AutoNumber("fit_from", "auto", "front travel (in r0) before the fit window of D and of the state behind "
                "the front starts; auto: the end of the start-up transient at u (shock_size); 0: from 20% of "
                "the sample"),
@@ -172,7 +174,7 @@ PARAMS = [
     Param("dt_retries", 2, "times the run starts again with half the time step when the dynamics' "
           "stiffness check stops it (0: stop with InstabilityError)", kind="int", low=0),
     Param("attraction", "all", "'initial': only pairs bonded at set-up attract, later contacts only repel "
-          "(remedy for the soft response near 2 km/s, physics.md 1.5)", kind="choice",
+          "(remedy for the soft response near 2 km/s, docs/theory.md 1.5)", kind="choice",
           choices=("all", "initial")),
     Param("inclusion", None, "material of spherical inclusions (two-phase sample; 'material' is the "
           "matrix)", kind="choice", choices=CD_MATERIALS, optional=True),
@@ -202,7 +204,7 @@ class ShockSetup:
 
 
 #: the time step follows r0/(c0 + u) until the sound speed at the shock's compression exceeds
-#: STIFF_SLACK * c0; beyond, r0/(c_s/STIFF_SLACK + u) (physics.md 3: dt ~ r0/c_max)
+#: STIFF_SLACK * c0; beyond, r0/(c_s/STIFF_SLACK + u) (docs/theory.md 3: dt ~ r0/c_max)
 STIFF_SLACK = 2.0
 
 
