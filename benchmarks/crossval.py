@@ -2,6 +2,7 @@
 
     python benchmarks/crossval.py                 # u = 3 km/s, size 100x8x8, damping off and J = 50
     python benchmarks/crossval.py --size 60x6x6 --J none
+    python benchmarks/crossval.py --u 6 --size auto --J none   # the shock scene's default sample at 6 km/s
 
 1. Forces: the scene after ``--steps-before`` steps of clusterdyn (the front
    has formed, so pairs span compression and tension) is exported with
@@ -70,9 +71,11 @@ def compare_shock(size, u, J, folder, frames=60, nprocs=1, seed=1):
     t_cd = time.perf_counter() - t0
     r = run_lammps(folder, nprocs)
     x_lo = template.positions[~s.piston_mask, 0].min()
-    tr_l, st_l = shock_from_lammps(r, template, s.piston_mask, s.material.rho0, s.u, s.slab, s.length, x_lo)
+    tr_l, st_l = shock_from_lammps(r, template, s.piston_mask, s.material.rho0, s.u, s.slab, s.length, x_lo,
+                                   fit_from=s.fit_from)
     kms = units.km_s
-    return {"N": len(template), "J": J, "u_km_s": u / kms, "steps": s.nsteps,
+    return {"N": len(template), "J": J, "u_km_s": u / kms, "steps": s.nsteps, "size": "x".join(map(str, s.size)),
+            "steady_cd": st.steady, "steady_lammps": st_l.steady,
             "D_cd_km_s": st.D_fit / kms, "D_cd_err": st.D_fit_err / kms,
             "D_lammps_km_s": st_l.D_fit / kms, "D_lammps_err": st_l.D_fit_err / kms,
             "D_rel_diff": float(abs(st_l.D_fit - st.D_fit) / st.D_fit),
@@ -89,7 +92,7 @@ def main(argv=None):
     ap.add_argument("--steps-before", type=int, default=600)
     ap.add_argument("--out", default=str(HERE / "results" / "crossval"))
     a = ap.parse_args(argv)
-    size = tuple(int(x) for x in a.size.split("x"))
+    size = a.size if a.size.startswith("auto") else tuple(int(x) for x in a.size.split("x"))
     u = a.u * units.km_s
     out = {"size": a.size, "u_km_s": a.u, "forces": [], "shock": []}
     with tempfile.TemporaryDirectory() as d:
@@ -122,12 +125,16 @@ def markdown(out):
                  f"{f['median_rel_per_particle']:.2e} | {b['max_rel_to_fmax_r_ge_0.75r0']:.2e} | "
                  f"{f['energy_rel_diff']:.2e} |")
     L += ["", "## Shock speed (same set-up, full run, same front fit)", "",
-          "| N | damping | steps | D clusterdyn (km/s) | D LAMMPS (km/s) | rel diff | P cd / LAMMPS (GPa) |",
-          "|---|---|---|---|---|---|---|"]
+          "| size | N | damping | steps | D clusterdyn (km/s) | D LAMMPS (km/s) | rel diff | P cd / LAMMPS (GPa) "
+          "| steady cd / LAMMPS |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    yn = {True: "yes", False: "no", None: "-"}
     for s in out["shock"]:
-        L.append(f"| {s['N']} | {'off' if s['J'] is None else 'J = %g' % s['J']} | {s['steps']} | "
-                 f"{s['D_cd_km_s']:.3f} +- {s['D_cd_err']:.3f} | {s['D_lammps_km_s']:.3f} +- {s['D_lammps_err']:.3f} | "
-                 f"{s['D_rel_diff']:.2%} | {s['P_cd_GPa']:.2f} / {s['P_lammps_GPa']:.2f} |")
+        L.append(f"| {s.get('size', out['size'])} | {s['N']} | {'off' if s['J'] is None else 'J = %g' % s['J']} | "
+                 f"{s['steps']} | {s['D_cd_km_s']:.3f} +- {s['D_cd_err']:.3f} | "
+                 f"{s['D_lammps_km_s']:.3f} +- {s['D_lammps_err']:.3f} | {s['D_rel_diff']:.2%} | "
+                 f"{s['P_cd_GPa']:.2f} / {s['P_lammps_GPa']:.2f} | {yn[s.get('steady_cd')]} / "
+                 f"{yn[s.get('steady_lammps')]} |")
     return "\n".join(L) + "\n"
 
 

@@ -71,6 +71,8 @@ def _print_result(res, args):
         print(res.table())
         for f in res.files:
             print(f"wrote {f}")
+    for w in res.warnings:      # one line each on stderr, also with --json and --quiet
+        print(f"clusterdyn: warning: {w}", file=sys.stderr)
 
 
 def _threads(args):

@@ -1,6 +1,6 @@
 """Shock analysis: binned profiles along the shock direction, front tracking, the state behind the front.
 
-Conventions (physics.md 1.4-1.5): stresses are tension-positive; the
+Conventions (docs/theory.md 1.4-1.5): stresses are tension-positive; the
 longitudinal stress behind the front is ``P = -sigma_xx`` with the virial
 and kinetic parts (kinetic part about the bin's mean velocity).  D is the
 lab-frame speed of the front into material at rest.
@@ -70,13 +70,15 @@ def fit_front(times, fronts):
     return float(D), float(x0), float(np.sqrt(np.mean(res ** 2)))
 
 
-#: A run is steady when (physics.md 1.5, docs/hugoniot.md) the front position is linear in
+#: A run is steady when (docs/theory.md 1.5, docs/hugoniot.md) the front position is linear in
 #: time -- rms residual of the line at most STEADY_FIT_RMS slab widths and D from the first and
 #: second half of the fit window within STEADY_D_HALVES of each other -- and the mean particle
 #: velocity behind the front is within STEADY_U_TOL of the piston speed.
 STEADY_FIT_RMS = 0.5
 STEADY_D_HALVES = 0.03
 STEADY_U_TOL = 0.03
+#: fewest frames in the fit window (the two halves need three each)
+STEADY_MIN_FRAMES = 6
 
 
 @dataclass
@@ -195,15 +197,22 @@ class ShockTracker:
     behind_gap, piston_gap : float
         Gaps (slab widths) that keep the front's ramp and the piston's
         start-up out of the averaged region.
+    fit_from : float, optional
+        Front travel (Angstrom from ``lo``) before which frames are left out
+        of the fit and the averages: the start-up transient of the front
+        (overdriven at first, then relaxing), whose length depends on the
+        piston speed, not on the sample (:func:`clusterdyn.scenes.shock.shock_size`).
+        The fit window starts at the larger of this and ``x_min_frac`` of the sample.
 
     The first frame added is the reference configuration (the Lagrangian
     coordinates ``X0`` of the compression ``dx/dX``): add it before the run starts.
     """
 
     def __init__(self, rho0, u_piston, width, axis=0, lo=None, hi=None, rest_volume=None,
-                 behind_gap=3.0, piston_gap=3.0):
+                 behind_gap=3.0, piston_gap=3.0, fit_from=None):
         self.rho0, self.u_piston, self.width, self.axis = rho0, u_piston, width, axis
         self.lo, self.hi = lo, hi
+        self.fit_from = None if fit_from is None else float(fit_from)
         self.rest_volume = None if rest_volume is None else np.asarray(rest_volume, float)
         self.behind_gap, self.piston_gap = float(behind_gap), float(piston_gap)
         self.X0 = None
@@ -214,14 +223,14 @@ class ShockTracker:
         return {"rho0": self.rho0, "u_piston": self.u_piston, "width": self.width, "axis": self.axis,
                 "lo": self.lo, "hi": self.hi, "frames": self.frames, "X0": self.X0,
                 "rest_volume": self.rest_volume, "behind_gap": self.behind_gap,
-                "piston_gap": self.piston_gap}
+                "piston_gap": self.piston_gap, "fit_from": self.fit_from}
 
     @classmethod
     def from_state(cls, st):
         t = cls(float(st["rho0"]), float(st["u_piston"]), float(st["width"]), int(st["axis"]),
                 None if st["lo"] is None else float(st["lo"]), None if st["hi"] is None else float(st["hi"]),
                 rest_volume=st.get("rest_volume"), behind_gap=float(st.get("behind_gap", 3.0)),
-                piston_gap=float(st.get("piston_gap", 3.0)))
+                piston_gap=float(st.get("piston_gap", 3.0)), fit_from=st.get("fit_from"))
         t.frames = [dict(f) for f in st["frames"]]
         if st.get("X0") is not None:
             t.X0 = np.asarray(st["X0"], float)
@@ -284,29 +293,38 @@ class ShockTracker:
         return {"n_region": int(sel.sum()), "u_region": float(vbar[ax]), "u_fit": u_fit, "slope": float(slope),
                 "rho_region": float(M / V), "stress_region": W / V}
 
+    def fit_window(self, x_min_frac=0.2, x_max_frac=0.85):
+        """The front positions ``(a, b)`` (Angstrom) between which frames are fitted and averaged:
+        ``a = lo + max(x_min_frac L, fit_from)``, ``b = lo + x_max_frac L`` (L the slabs' span)."""
+        lo = self.frames[0]["profile"]["edges"][0]
+        hi = self.frames[0]["profile"]["edges"][-1]
+        L = hi - lo
+        a = max(x_min_frac * L, self.fit_from or 0.0)
+        return lo + a, lo + x_max_frac * L
+
     def result(self, x_min_frac=0.2, x_max_frac=0.85):
-        """Fit D over the frames with the front between the given fractions of the sample
-        length, and average the state of the region behind the front over the same frames.
+        """Fit D over the frames with the front in :meth:`fit_window`, and average the state
+        of the region behind the front over the same frames.
         """
         if not self.frames:
             raise ValueError("no frames recorded")
         ax = self.axis
-        lo = self.frames[0]["profile"]["edges"][0]
-        hi = self.frames[0]["profile"]["edges"][-1]
-        L = hi - lo
         notes = []
         t = np.array([f["t"] for f in self.frames])
         xf = np.array([f["front"] for f in self.frames])
-        use = np.isfinite(xf) & (xf > lo + x_min_frac * L) & (xf < lo + x_max_frac * L)
-        if use.sum() < 3:
-            notes.append(f"only {int(use.sum())} frames with the front in {x_min_frac:.2f}-"
-                         f"{x_max_frac:.2f} of the sample; fit uses all frames with a front")
+        a, b = self.fit_window(x_min_frac, x_max_frac)
+        use = np.isfinite(xf) & (xf > a) & (xf < b)
+        n_window = int(use.sum())
+        if n_window < 3:
+            lo = self.frames[0]["profile"]["edges"][0]
+            notes.append(f"only {int(use.sum())} frames with the front between {(a - lo) / self.width:.1f} and "
+                         f"{(b - lo) / self.width:.1f} slabs of the sample; fit uses all frames with a front")
             use = np.isfinite(xf)
         D, x0, rms = fit_front(t[use], xf[use])
         tt = t[use]
         D_err = rms / np.sqrt(((tt - tt.mean()) ** 2).sum()) if len(tt) > 2 else np.nan
         halves = (np.nan, np.nan)
-        if len(tt) >= 6:
+        if len(tt) >= STEADY_MIN_FRAMES:
             h = len(tt) // 2
             halves = (_line(tt[:h], xf[use][:h])[0], _line(tt[h:], xf[use][h:])[0])
         frames = [f for f, ok in zip(self.frames, use) if ok and f.get("n_region", 0) > 0]
@@ -339,6 +357,9 @@ class ShockTracker:
         reasons = []
         if not np.isfinite(D):
             reasons.append("no front fit")
+        elif n_window < STEADY_MIN_FRAMES:
+            reasons.append(f"only {n_window} frames in the fit window, {STEADY_MIN_FRAMES} needed: the sample is "
+                           "too short for the front to settle")
         else:
             if not rms <= STEADY_FIT_RMS * self.width:
                 reasons.append(f"front not linear in time (rms residual {rms / self.width:.2f} slabs > "
@@ -400,7 +421,7 @@ def hugoniot_interpolant(u, D):
 
 
 def mixture_D(u, phases, closure="equal_u"):
-    """Shock speed of a mixture at particle velocity ``u`` (Kuropatenko's rule, physics.md 1.6).
+    """Shock speed of a mixture at particle velocity ``u`` (Kuropatenko's rule, docs/theory.md 1.6).
 
     .. math::
 
@@ -467,12 +488,15 @@ def mixture_D(u, phases, closure="equal_u"):
     return float(mix(P)[1])
 
 
-def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo, axis=0, rest_volume=None):
+def shock_from_lammps(run, template, piston_mask, rho0, u, slab, length, x_lo, axis=0, rest_volume=None,
+                      fit_from=None):
     """Shock front analysis (:class:`clusterdyn.analysis.shock.ShockTracker`) of a LAMMPS run's frames.
 
     ``axis``: the shock direction (0, 1, 2); ``rest_volume``: (N,) rest volume
-    of each cluster for a two-phase sample (as the live run's tracker)."""
-    tracker = ShockTracker(rho0, u, slab, axis=axis, lo=x_lo, hi=x_lo + length + slab, rest_volume=rest_volume)
+    of each cluster for a two-phase sample (as the live run's tracker); ``fit_from``:
+    the start of the fit window, as the clusterdyn run's."""
+    tracker = ShockTracker(rho0, u, slab, axis=axis, lo=x_lo, hi=x_lo + length + slab, rest_volume=rest_volume,
+                           fit_from=fit_from)
     dt_ps = None
     meta = json.loads((Path(run.folder) / META_FILE).read_text())
     dt_ps = meta["dt_ps"]

@@ -210,7 +210,12 @@ def _clean(v):
 
 @dataclass
 class SceneResult:
-    """What a scene returns: quantities (with units, references, errors) and wall time."""
+    """What a scene returns: quantities (with units, references, errors) and wall time.
+
+    ``steady`` is the scene's verdict on whether what it measured had settled
+    (None: the scene makes no such check); ``warnings`` are one-line messages
+    the CLI prints on stderr (e.g. why a run is not steady and what would fix it).
+    """
 
     scene: str
     quantities: dict
@@ -219,11 +224,17 @@ class SceneResult:
     files: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    steady: bool = None
+    warnings: list = field(default_factory=list)
 
     def as_dict(self):
         d = {"scene": self.scene}
         for k, q in self.quantities.items():
             d[k] = q.as_dict()
+        if self.steady is not None:
+            d["steady"] = bool(self.steady)
+        if self.warnings:
+            d["warnings"] = list(self.warnings)
         d["wall_time_s"] = round(self.wall_time_s, 4)
         d["params"] = {k: _jsonable(v) for k, v in self.params.items()}
         d["files"] = [str(f) for f in self.files]
@@ -245,6 +256,8 @@ class SceneResult:
             sp = "" if q.spread is None else f"  (+- {q.spread:.3g})"
             lines.append(f"{k:<22}{q.value:14.6g} {q.unit:<8}{ref:>14}{err:>12}{sp}")
         lines.append(f"{'wall time':<22}{self.wall_time_s:14.3f} s")
+        if self.steady is not None:
+            lines.append(f"{'steady':<22}{'yes' if self.steady else 'NO':>14}")
         for n in self.notes:
             lines.append(f"note: {n}")
         return "\n".join(lines)

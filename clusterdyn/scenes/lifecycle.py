@@ -161,6 +161,9 @@ class SceneDef:
         """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths."""
         return []
 
+    def verdict(self, v, summaries, result):
+        """Set ``result.steady`` and ``result.warnings`` (one line each) where the scene can judge its run."""
+
     def retry(self, v, stage, exc, attempt):
         """Parameters for another attempt after ``exc`` (InstabilityError), or None to stop."""
         return None
@@ -259,6 +262,7 @@ class SceneDef:
         quantities, notes, extra = self.analyse(v, summaries)
         res = SceneResult(self.name, quantities, 0.0, params=self.display(v), notes=list(notes),
                           extra=extra, files=[f for f in files if f])
+        self.verdict(v, summaries, res)
         if out is not None:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]
         res.wall_time_s = time.perf_counter() - t0

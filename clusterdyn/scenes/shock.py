@@ -30,17 +30,140 @@ from .lifecycle import SceneDef, Stage, scene_params
 #: the library materials with a cold curve (materials registered later are not in the choice list)
 CD_MATERIALS = tuple(cd_material_names())
 
+#: ``size=auto`` and ``fit_from=auto`` against the piston speed, measured on aluminium [100] (damping
+#: off, 10 m/s noise, 6x6 cells across; ``benchmarks/shock_length.py`` replays long runs cut to
+#: shorter lengths, docs/hugoniot.md "Steady at the defaults").  Rows: u (km/s), the front travel
+#: (in [100] repeat cells, sqrt(2) r0 each) after which the start-up transient is over (the front
+#: starts overdriven, relaxes, and settles there) and the fit window starts, and the sample length
+#: (repeat cells): at least 1.2 times the shortest length that is steady with that window, chosen where
+#: every longer cut was steady too.  Linear in u between rows; the last row is the top of the u range.
+AUTO_RULE = (
+    (0.5, 30, 100),
+    (1.0, 30, 100),
+    (1.5, 70, 300),
+    (2.0, 70, 300),
+    (3.0, 50, 120),
+    (4.0, 50, 120),
+    (5.0, 60, 160),
+    (6.0, 70, 180),
+    (7.0, 60, 160),
+    (8.0, 40, 120),
+    (10.0, 50, 140),
+)
+#: length of the rule's cells: the [100] repeat cell, sqrt(2) r0
+AUTO_CELL_R0 = math.sqrt(2.0)
+#: width of the ``auto`` cross-section: 6 repeat cells along [100] (6 sqrt(2) r0), whatever the direction
+AUTO_WIDTH_R0 = 6 * AUTO_CELL_R0
+#: top of the u range (km/s): the last row of AUTO_RULE, the fastest piston whose steady length was measured
+U_MAX = AUTO_RULE[-1][0]
+
+
+class SampleSize(Param):
+    """The ``size`` parameter: ``auto`` (length and cross-section from u, :func:`shock_size`),
+    ``autoxNYxNZ`` (length from u, cross-section given) or ``NXxNYxNZ`` repeat cells."""
+
+    def __init__(self, doc):
+        super().__init__("size", "auto", doc, kind="ints")
+
+    def describe(self):
+        return f"{self.name} = auto  -- {self.doc}"
+
+    def _allowed(self):
+        return "auto, autoxNYxNZ or NXxNYxNZ repeat cells (integers >= 1) like 120x6x6"
+
+    def parse(self, value):
+        if isinstance(value, str) and value.strip().lower().startswith("auto"):
+            rest = value.strip().lower()[4:].strip("x, ")
+            if not rest:
+                return "auto"
+            try:
+                ny, nz = (int(x) for x in rest.replace(",", "x").split("x"))
+            except ValueError:
+                raise InputError(self.name, value, self._allowed()) from None
+            if ny < 1 or nz < 1:
+                raise InputError(self.name, value, self._allowed())
+            return f"autox{ny}x{nz}"
+        try:
+            return Param(self.name, (1, 1, 1), self.doc, kind="ints").parse(value)
+        except InputError:
+            raise InputError(self.name, value, self._allowed()) from None
+
+
+class AutoNumber(Param):
+    """A plain number (>= 0) or ``auto``."""
+
+    def describe(self):
+        return f"{self.name} = auto  -- {self.doc}"
+
+    def parse(self, value):
+        if isinstance(value, str) and value.strip().lower() == "auto":
+            return "auto"
+        try:
+            return Param(self.name, 0.0, self.doc, low=0.0).parse(value)
+        except InputError:
+            raise InputError(self.name, value, "auto or a number >= 0") from None
+
+
+def _rule(u_km_s):
+    """(transient, length) in r0 at ``u_km_s`` (AUTO_RULE, linear in u, constant beyond its ends)."""
+    rows = np.array(AUTO_RULE, float)
+    return (AUTO_CELL_R0 * float(np.interp(u_km_s, rows[:, 0], rows[:, 1])),
+            AUTO_CELL_R0 * float(np.interp(u_km_s, rows[:, 0], rows[:, 2])))
+
+
+def shock_size(u, size="auto", direction="100", fit_from="auto", r0=1.0):
+    """Sample size and fit-window start of a shock at piston speed ``u`` (ASE units).
+
+    ``size="auto"``: the sample length along the shock from :data:`AUTO_RULE`
+    (measured on aluminium: the shortest sample that is steady at u, with a
+    margin), rounded up to whole repeat cells, and a cross-section of at least
+    :data:`AUTO_WIDTH_R0`; ``"autoxNYxNZ"`` keeps the given cross-section; a
+    tuple ``(nx, ny, nz)`` is used as given.  ``fit_from="auto"``: the front
+    travel after which the fit window starts (the end of the start-up
+    transient, :data:`AUTO_RULE`); a number is that travel in r0 (0: the window
+    is the fraction window of :meth:`ShockTracker.result` alone).
+
+    Returns
+    -------
+    ((nx, ny, nz), fit_from) with ``fit_from`` in the units of ``r0``.
+    """
+    uk = u / units.km_s
+    transient, length = _rule(min(uk, U_MAX))
+    rep = repeat_lengths(direction, 1.0)
+    if isinstance(size, str):
+        if size == "auto":
+            across = tuple(int(math.ceil(AUTO_WIDTH_R0 / rep[k] - 1e-9)) for k in (1, 2))
+        else:
+            across = tuple(int(x) for x in size[5:].split("x"))
+        size = (int(math.ceil(length / rep[0] - 1e-9)),) + across
+    fit = transient if fit_from == "auto" else float(fit_from)
+    return tuple(int(x) for x in size), fit * r0
+
+
+def suggest_size(u, size, direction="100"):
+    """A sample size (text ``NXxNYxNZ``) that should make a run of ``size`` at ``u`` steady: the
+    ``auto`` length when ``size`` is shorter, else twice the length (same cross-section)."""
+    n_auto = shock_size(u, "auto", direction)[0][0]
+    nx = n_auto if size[0] < n_auto else 2 * size[0]
+    return f"{nx}x{size[1]}x{size[2]}"
+
+
 PARAMS = [
     Param("material", "Al", "material of the block", kind="choice", choices=CD_MATERIALS),
-    Param("u", 3.0, "piston speed", unit="km/s", low=0.0, high=20.0, low_open=True),
+    Param("u", 3.0, "piston speed (the top of the range is the fastest speed whose steady sample length "
+          "was measured, AUTO_RULE)", unit="km/s", low=0.0, high=U_MAX, low_open=True),
     Param("u_history", None, "piston velocity history U(t): a CSV file with a time column (t_ns, t_us, ...) and "
           "a speed column (u_km_s, u_m_s, ...) or a vector (ux_,uy_,uz_), held at its ends; u then sizes the run "
           "(time step, run length, reference) and must be at least the table's largest speed", kind="str",
           optional=True),
     Param("direction", "100", "crystal direction along the shock", kind="choice",
           choices=("100", "110", "111")),
-    Param("size", (100, 8, 8), "repeat cells along the shock and across it (the first is along the shock)",
-          kind="ints"),
+    SampleSize("repeat cells along the shock and across it (the first along the shock); auto: the sample "
+               "length that is steady at u (100-300 [100] cells, measured on aluminium; shock_size), 6x6 cells "
+               "across; autoxNYxNZ: that length with the given cross-section"),
+    AutoNumber("fit_from", "auto", "front travel (in r0) before the fit window of D and of the state behind "
+               "the front starts; auto: the end of the start-up transient at u (shock_size); 0: from 20% of "
+               "the sample"),
     Param("r0", 5.0, "cluster size", unit="um", low=0.0, low_open=True),
     Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
     Param("J", None, "damping Gamma = c0/(J r0); none = off (shock Hugoniots run undamped)",
@@ -56,7 +179,7 @@ PARAMS = [
     Param("dt_retries", 2, "times the run starts again with half the time step when the dynamics' "
           "stiffness check stops it (0: stop with InstabilityError)", kind="int", low=0),
     Param("attraction", "all", "'initial': only pairs bonded at set-up attract, later contacts only repel "
-          "(remedy for the soft response near 2 km/s, physics.md 1.5)", kind="choice",
+          "(remedy for the soft response near 2 km/s, docs/theory.md 1.5)", kind="choice",
           choices=("all", "initial")),
     Param("inclusion", None, "material of spherical inclusions (two-phase sample; 'material' is the "
           "matrix)", kind="choice", choices=CD_MATERIALS, optional=True),
@@ -81,10 +204,12 @@ class ShockSetup:
     rho0: float = None              #: mean density at rest (default material.rho0)
     two_phase: dict = None          #: atoms.info['two_phase'] of a two-phase sample
     axis: int = 0                   #: shock direction (0, 1, 2)
+    fit_from: float = None          #: front travel (Angstrom) before the fit window starts
+    size: tuple = None              #: repeat cells (nx, ny, nz) of the sample
 
 
 #: the time step follows r0/(c0 + u) until the sound speed at the shock's compression exceeds
-#: STIFF_SLACK * c0; beyond, r0/(c_s/STIFF_SLACK + u) (physics.md 3: dt ~ r0/c_max)
+#: STIFF_SLACK * c0; beyond, r0/(c_s/STIFF_SLACK + u) (docs/theory.md 3: dt ~ r0/c_max)
 STIFF_SLACK = 2.0
 
 
@@ -184,11 +309,13 @@ def piston_history(u_history, u):
     return hist
 
 
-def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 8), r0=5 * units.um,
+def build_shock(material="Al", u=3 * units.km_s, direction="100", size="auto", r0=5 * units.um,
                 rc=1.15, J=None, noise=10 * units.m_s, seed=1, dt_factor=TIMESTEP_FACTOR,
                 run_fraction=0.8, attraction="all", inclusion=None, inclusion_fraction=0.28,
-                inclusion_diameter=56 * units.um, r0_inclusion=None, axis=0, u_history=None):
+                inclusion_diameter=56 * units.um, r0_inclusion=None, axis=0, fit_from="auto", u_history=None):
     """Sample, calculator, piston and dynamics of a piston shock (ASE units).
+
+    ``size`` and ``fit_from`` as in :func:`shock_size` (``"auto"``: from u).
 
     ``attraction="initial"`` marks the set-up bonds (before the noise) and
     lets only them attract.  With ``inclusion`` the sample is two-phase
@@ -209,6 +336,7 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
         raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
     if not u > 0:
         raise InputError("u", u, "a positive piston speed")
+    size, fit_from = shock_size(u, size, direction, fit_from, r0)
     if attraction not in ("all", "initial"):
         raise InputError("attraction", attraction, "'all' or 'initial'")
     hist = None if u_history is None else piston_history(u_history, u)
@@ -250,7 +378,8 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size=(100, 8, 
     nsteps = int(math.ceil(t_end / dt))
     # slab width: one repeat length along x for [100] (two planes), at least r0
     slab = max(float(repeat_lengths(direction, r0)[0]), r0)
-    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info, axis)
+    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info, axis,
+                      fit_from, size)
 
 
 def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", tracker=None):
@@ -278,7 +407,7 @@ def shock_tracker(setup, x0):
     """The front tracker of a shock set-up, its slabs from ``x0`` (the sample's start) on."""
     rho0 = setup.material.rho0 if setup.rho0 is None else setup.rho0
     return ShockTracker(rho0, setup.u, setup.slab, axis=setup.axis, lo=x0,
-                        hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume)
+                        hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume, fit_from=setup.fit_from)
 
 
 def plot_shock(tracker, state, path, title="", u=None, P_ref=None):
@@ -292,12 +421,15 @@ def plot_shock(tracker, state, path, title="", u=None, P_ref=None):
     axs[0].plot(t, xf, "o", ms=3, label="front")
     axs[0].plot(t, xp, "-", label="piston")
     if np.isfinite(state.D_fit):
-        tt = np.linspace(t.min(), t.max(), 10)
-        # refit line for display
-        ok = np.isfinite(xf)
+        # the fitted line over the fit window (the frames the analysis used)
+        a, b = tracker.fit_window()
+        ok = np.isfinite(xf) & (xf > a / units.um) & (xf < b / units.um)
+        if ok.sum() < 3:
+            ok = np.isfinite(xf)
+        tt = np.linspace(t[ok].min(), t[ok].max(), 10)
         A = np.polyfit(t[ok], xf[ok], 1)
         axs[0].plot(tt, np.polyval(A, tt), "k--", lw=0.8,
-                    label=f"D = {state.D_fit / units.km_s:.3f} km/s")
+                    label=f"D = {state.D_fit / units.km_s:.3f} km/s (fit window)")
     axs[0].set_xlabel("t (ns)")
     axs[0].set_ylabel(f"{'xyz'[tracker.axis]} (um)")
     axs[0].legend()
@@ -378,7 +510,8 @@ def shock_info(s):
     return {"piston": np.nonzero(s.piston_mask)[0], "nsteps": s.nsteps, "slab": s.slab, "length": s.length,
             "u": s.u, "rho0": s.rho0 if s.rho0 else s.material.rho0, "axis": ax,
             "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
-            "two_phase": {k: x for k, x in (s.two_phase or {}).items()}}
+            "two_phase": {k: x for k, x in (s.two_phase or {}).items()},
+            "fit_from": s.fit_from, "size": list(s.size)}
 
 
 def shock_stage(name, atoms, dyn, info, material, frames):
@@ -390,7 +523,7 @@ def shock_stage(name, atoms, dyn, info, material, frames):
     two = info["two_phase"] or None
     setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
                        float(info["length"]), material, float(info["u"]), rest_volumes(atoms), float(info["rho0"]), two,
-                       int(info["axis"]))
+                       int(info["axis"]), info.get("fit_from"), tuple(info.get("size", ())))
     tracker = shock_tracker(setup, float(info["x0"]))
     ax = setup.axis
 
@@ -414,7 +547,8 @@ def shock_summary(stage):
     pot = s.calc.potentials[0]
     return {"tracker": stage.analysis.get_state(), "n": len(s.atoms), "nsteps": s.nsteps, "t_run": stage.t_run,
             "nbuilds": s.calc.nl.nbuilds, "dt_r0_c0": stage.dyn.dt / (pot.r0 / pot.c0),
-            "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"]}
+            "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"],
+            "size": list(s.size), "fit_from_r0": (s.fit_from or 0.0) / pot.r0, "slab_r0": s.slab / pot.r0}
 
 
 class ShockScene(SceneDef):
@@ -428,26 +562,36 @@ class ShockScene(SceneDef):
         mat = get_material(v["material"])
         if mat.curve is None:
             raise InputError("material", v["material"], "a material with a cold curve: " + ", ".join(CD_MATERIALS))
-        if v["size"][0] < MIN_CELLS:
-            raise InputError("size", "x".join(map(str, v["size"])),
+        size = self.size(v)
+        text = v["size"] if isinstance(v["size"], str) else "x".join(map(str, size))
+        if size[0] < MIN_CELLS:
+            raise InputError("size", text,
                              f"at least {MIN_CELLS} repeat cells along the shock (the front is fitted over "
-                             f"slabs); e.g. {MIN_CELLS}x{v['size'][1]}x{v['size'][2]}")
+                             f"slabs); e.g. {MIN_CELLS}x{size[1]}x{size[2]}")
         rep = repeat_lengths(v["direction"], v["r0"])
         need = 2.0 * v["rc"] * v["r0"]
         for k in (1, 2):
-            if rep[k] * v["size"][k] < need:
+            if rep[k] * size[k] < need:
                 nmin = int(math.ceil(need / rep[k]))
-                raise InputError("size", "x".join(map(str, v["size"])),
+                raise InputError("size", text,
                                  f"a periodic cross-section at least 2 rc r0 wide ({nmin} cells across for "
                                  f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
         if v["u_history"] is not None:
             piston_history(v["u_history"], v["u"])
 
+    @staticmethod
+    def size(v):
+        """The sample's repeat cells (``size=auto`` resolved, :func:`shock_size`)."""
+        return shock_size(v["u"], tuple(v["size"]) if isinstance(v["size"], list) else v["size"],
+                          v["direction"])[0]
+
     def setup(self, v, stage):
-        s = build_shock(v["material"], v["u"], v["direction"], v["size"], v["r0"], v["rc"], v["J"], v["noise"],
+        size = v["size"] if isinstance(v["size"], str) else tuple(v["size"])
+        s = build_shock(v["material"], v["u"], v["direction"], size, v["r0"], v["rc"], v["J"], v["noise"],
                         v["seed"], v["dt_factor"], attraction=v["attraction"], inclusion=v["inclusion"],
                         inclusion_fraction=v["inclusion_fraction"],
-                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"], u_history=v["u_history"])
+                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"], u_history=v["u_history"],
+                        fit_from=v["fit_from"])
         return s.atoms, s.dyn, shock_info(s)
 
     def attach(self, v, stage, atoms, dyn, info):
@@ -476,6 +620,13 @@ class ShockScene(SceneDef):
             notes.append(f"time step halved after a stop: {r}")
         notes.append(f"{n} clusters, {nsteps} steps of {sm['dt_r0_c0']:.4f} r0/c0, "
                      f"{n * nsteps / max(t_run, 1e-9):.3g} particle-steps/s, {sm['nbuilds']} neighbour-list builds")
+        size = sm.get("size") or list(self.size(v))
+        a, b = tracker.fit_window()
+        x0 = tracker.frames[0]["profile"]["edges"][0]
+        notes.append(f"sample {'x'.join(map(str, size))} repeat cells"
+                     + (" (size=auto: the length steady at this u)" if isinstance(v["size"], str) else "")
+                     + f"; front fitted from {(a - x0) / state.width:.0f} to {(b - x0) / state.width:.0f} slabs "
+                     f"({state.n_frames} frames)")
         notes.append(f"front fit: rms residual {state.fit_rms / units.um:.3g} um = {state.fit_rms / state.width:.3f} "
                      f"slabs; D over the two halves of the fit {state.D_halves[0] / units.km_s:.4g}, "
                      f"{state.D_halves[1] / units.km_s:.4g} km/s")
@@ -490,7 +641,9 @@ class ShockScene(SceneDef):
                  "D_halves_km_s": [h / units.km_s for h in state.D_halves],
                  "mass_check": state.mass_check, "momentum_check": state.momentum_check,
                  "ejecta_fraction": state.ejecta, "rho_bins_g_cm3": state.rho_bins / units.g_cm3,
-                 "rho0_g_cm3": sm["rho0"] / units.g_cm3, "n_particles": n, "n_steps": nsteps,
+                 "rho0_g_cm3": sm["rho0"] / units.g_cm3, "size_used": list(size),
+                 "fit_window_slabs": [(a - x0) / state.width, (b - x0) / state.width],
+                 "n_fit_frames": state.n_frames, "n_particles": n, "n_steps": nsteps,
                  "particle_steps": n * nsteps, "timestep_r0_c0": sm["dt_r0_c0"], "dt_factor_used": v["dt_factor"],
                  "dt_retries_used": len(v.get("_retried", [])), "stepping_time_s": t_run,
                  "particle_steps_per_s": n * nsteps / max(t_run, 1e-9)}
@@ -498,6 +651,18 @@ class ShockScene(SceneDef):
             extra["two_phase"] = {k: x for k, x in two.items() if k not in ("centres", "diameters")}
             extra["two_phase"]["rho0"] = two["rho0"] / units.g_cm3
         return q, notes, extra
+
+    def verdict(self, v, summaries, result):
+        """``result.steady`` from the front fit; an unsteady run warns with the reasons and a size that
+        should settle it (:func:`suggest_size`)."""
+        x = result.extra
+        result.steady = bool(x["steady"])
+        if not result.steady:
+            size = x["size_used"]
+            result.warnings.append(
+                f"shock not steady on {'x'.join(map(str, size))} cells ({'; '.join(x['steady_reasons'])}): D = "
+                f"{result.quantities['D'].value:.4g} km/s is not the steady value; rerun with --set size="
+                f"{suggest_size(v['u'], size, v['direction'])}")
 
     def report(self, v, summaries, result, out):
         sm = summaries[0]

@@ -195,7 +195,8 @@ def load_result(path):
         q[k] = Quantity(val, x.get("unit", ""), x.get("reference"), x.get("rel_error"), x.get("spread"),
                         x.get("note", ""))
     res = SceneResult(d["scene"], q, d["wall_time_s"], params=d.get("params", {}), files=d.get("files", []),
-                      notes=d.get("notes", []), extra=d.get("extra", {}))
+                      notes=d.get("notes", []), extra=d.get("extra", {}), steady=d.get("steady"),
+                      warnings=d.get("warnings", []))
     return res
 
 

@@ -1,8 +1,9 @@
 """``clusterdyn study convergence --set scene=shock``: error of a shock run against its cost.
 
 Sweeps what sets the cost and the error of a run, one thing at a time around
-a base run (default Al, [100], u = 3 km/s, sample 40x8x8, dt factor 0.03,
-rc = 1.15, noise 10 m/s, r0 = 5 um):
+a base run (default Al, [100], u = 3 km/s, sample 120x6x6 -- the shock scene's
+``size=auto`` at 3 km/s --, dt factor 0.03, rc = 1.15, noise 10 m/s, r0 = 5 um;
+the fit window starts where the scene's starts, ``fit_from=auto``):
 
 * ``ladder``: sample sizes from tiny to the finest (the resolution ladder);
 * ``cross``: cross-section n x n repeat cells (4 ... 16) at length ``cross_length``;
@@ -56,20 +57,21 @@ class SizeListParam(Param):
 
 PARAMS = [
     Param("scene", "shock", "scene whose cost and error are swept", kind="choice", choices=("shock",)),
-    Param("base", (40, 8, 8), "sample of the base run (repeat cells)", kind="ints"),
-    SizeListParam("ladder", ((20, 4, 4), (40, 4, 4), (40, 8, 8), (80, 8, 8), (100, 8, 8), (160, 12, 12)),
+    Param("base", (120, 6, 6), "sample of the base run (repeat cells; the shock scene's size=auto at 3 km/s)",
+          kind="ints"),
+    SizeListParam("ladder", ((40, 4, 4), (80, 6, 6), (120, 6, 6), (180, 6, 6), (240, 8, 8)),
                   "resolution ladder: sample sizes, each at the base time step"),
-    Param("finest", (160, 16, 16), "sample of the finest run", kind="ints"),
+    Param("finest", (240, 8, 8), "sample of the finest run", kind="ints"),
     Param("finest_dt", 0.015, "time-step factor of the finest run", low=0.0, high=0.5, low_open=True),
-    ListParam("cross", (4, 8, 12, 16), "cross-sections n x n (repeat cells)", low=1, optional=True),
-    Param("cross_length", 80, "length of the cross-section sweep (repeat cells)", kind="int", low=4),
-    ListParam("lengths", (20, 40, 80, 160), "sample lengths (repeat cells)", low=4, optional=True),
-    Param("length_cross", 8, "cross-section of the length sweep (repeat cells)", kind="int", low=1),
-    ListParam("dt_factors", (0.0075, 0.015, 0.03, 0.06, 0.12), "time-step factors (of r0/(c0 + u))", low=0.0,
+    ListParam("cross", (4, 6, 8, 12), "cross-sections n x n (repeat cells)", low=1, optional=True),
+    Param("cross_length", 120, "length of the cross-section sweep (repeat cells)", kind="int", low=4),
+    ListParam("lengths", (60, 120, 180, 240), "sample lengths (repeat cells)", low=4, optional=True),
+    Param("length_cross", 6, "cross-section of the length sweep (repeat cells)", kind="int", low=1),
+    ListParam("dt_factors", (0.015, 0.03, 0.06, 0.12), "time-step factors (of r0/(c0 + u))", low=0.0,
               high=0.5, low_open=True, optional=True),
     ListParam("rcs", (1.1, 1.15, 1.2), "cutoffs (multiples of r0)", low=1.0, high=1.414, low_open=True,
               optional=True),
-    ListParam("noises", (0.0, 2.0, 10.0, 30.0), "initial noise amplitudes", unit="m/s", low=0.0, optional=True),
+    ListParam("noises", (0.0, 10.0, 30.0), "initial noise amplitudes", unit="m/s", low=0.0, optional=True),
     ListParam("r0s", (1.0, 5.0, 25.0), "cluster sizes at fixed geometry in cells", unit="um", low=0.0,
               low_open=True, optional=True),
     Param("cache", None, "folder of the runs' results, shared between studies (default OUT/runs)",

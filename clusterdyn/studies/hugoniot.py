@@ -45,7 +45,7 @@ from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..scenes import get_scene
 from ..scenes.base import Param
-from ..scenes.shock import CD_MATERIALS, cold_shock_state
+from ..scenes.shock import CD_MATERIALS, U_MAX, ShockScene, cold_shock_state
 from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
                      run_scene, shock_row, write_csv, write_json)
 
@@ -77,7 +77,7 @@ PARAMS = [
           choices=CD_MATERIALS),
     Param("case", None, "a two-phase sample of the CD paper (sets material, inclusion, inclusion_fraction, "
           "inclusion_diameter)", kind="choice", choices=tuple(PAPER_CASES), optional=True),
-    ListParam("u", DEFAULT_U, "piston speeds of the sweep", unit="km/s", low=0.0, high=20.0, low_open=True),
+    ListParam("u", DEFAULT_U, "piston speeds of the sweep", unit="km/s", low=0.0, high=U_MAX, low_open=True),
     Param("compare_J", None, "also run the sweep with damping Gamma = c0/(J r0) and report the shift of D",
           low=0.0, low_open=True, optional=True),
     Param("compare_attraction", False, "also run the sweep with attraction=initial", kind="bool"),
@@ -221,7 +221,11 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
 
     def run_row(ov):
         res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
-        return res, shock_row(res, err, wall), scene.display(scene.parse(ov))
+        pv = scene.display(scene.parse(ov))
+        # the sample that ran (size=auto resolved)
+        pv["size"] = tuple(res.extra["size_used"]) if res is not None and "size_used" in res.extra else \
+            tuple(ShockScene.size(scene.parse(ov)))
+        return res, shock_row(res, err, wall), pv
 
     rows = []
     bar = progress_bar(len(plan), f"hugoniot {tag}", progress)
@@ -259,7 +263,8 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
     text = []
     main = [r for r in rows if r["group"] == "main"]
     title = (f"CD Hugoniot of {tag} [{sv['direction']}], r0 = {sv['r0'] / units.um:g} um, rc = {sv['rc']:g}, "
-             f"size {'x'.join(map(str, sv['size']))}, J = {sv['J'] if sv['J'] else 'off'}, noise "
+             f"size {sv['size'] if isinstance(sv['size'], str) else 'x'.join(map(str, sv['size']))}, "
+             f"J = {sv['J'] if sv['J'] else 'off'}, noise "
              f"{sv['noise'] / units.m_s:g} m/s, attraction = {sv['attraction']}")
     text.append(format_table(main, MAIN_COLUMNS, title))
     text.append(_conservation_verdict(main))

@@ -10,7 +10,10 @@ from clusterdyn.scenes import get_scene
 
 
 def test_shock_3kms_small_sample(tmp_path):
-    res = get_scene("shock").run({"size": "40x4x4", "h5md": "false"}, out=tmp_path, progress=False)
+    # a 40-cell sample is shorter than the start-up transient the default fit window skips (50 cells
+    # at 3 km/s): fit from 20% of the sample instead (fit_from=0)
+    res = get_scene("shock").run({"size": "40x4x4", "fit_from": "0", "h5md": "false"}, out=tmp_path,
+                                 progress=False)
     D = res.quantities["D"]
     assert D.unit == "km/s" and D.reference == pytest.approx(5.392 + 1.341 * 3)
     assert abs(D.rel_error) < 0.03
@@ -32,6 +35,11 @@ def test_cli_json_and_errors(tmp_path):
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
     assert data["D"]["unit"] == "km/s" and abs(data["D"]["rel_error"]) < 0.03
+    # a deliberately short sample: not steady, said on one stderr line with the size that would fix it
+    assert data["steady"] is False and data["warnings"] == [out.stderr.strip()[len("clusterdyn: warning: "):]]
+    warn = out.stderr.strip().splitlines()
+    assert len(warn) == 1 and warn[0].startswith("clusterdyn: warning: shock not steady on 30x3x3 cells")
+    assert "too short" in warn[0] and warn[0].endswith("--set size=120x3x3")
     for bad, word in [(["run", "shock", "--set", "u=3kg"], "u="), (["run", "shock", "--set", "J=0"], "J="),
                       (["run", "shock", "--set", "r0=-5um"], "r0="), (["run", "nosuch"], "scene="),
                       (["run", "shock", "--set", "material=Kryptonite"], "material=")]:
@@ -39,3 +47,19 @@ def test_cli_json_and_errors(tmp_path):
         assert r.returncode == 2, (bad, r.stderr)
         assert word in r.stderr and "Traceback" not in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_top_of_the_u_range_runs_and_above_is_refused():
+    """The top of the u range (the last row of the size=auto rule) runs; a tiny sample keeps it quick."""
+    from clusterdyn.errors import InputError
+    from clusterdyn.scenes.shock import AUTO_RULE, U_MAX, shock_size
+    from clusterdyn import units
+    assert U_MAX == AUTO_RULE[-1][0] == 10.0
+    scene = get_scene("shock")
+    res = scene.run({"u": f"{U_MAX:g}km/s", "size": "16x3x3", "h5md": "false"}, progress=False)
+    assert res.extra["dt_retries_used"] == 0 and res.quantities["D"].value > U_MAX
+    assert res.steady is False          # 16 cells: far too short to be steady, and it says so
+    size, fit_from = shock_size(U_MAX * units.km_s)
+    assert size == (140, 6, 6) and fit_from > 0          # what the defaults run at the top
+    with pytest.raises(InputError, match="u="):
+        scene.parse({"u": f"{U_MAX + 0.1:g}km/s"})

@@ -11,7 +11,7 @@ from clusterdyn.errors import InputError
 from clusterdyn.studies import get_study, study_names
 from clusterdyn.studies.common import ListParam, pareto_front
 
-TINY = {"size": "16x3x3", "frames": "30"}
+TINY = {"size": "16x3x3", "frames": "30", "fit_from": "0"}   # fit from 20% of a tiny sample
 NO_REFINE = {"refine_length": "0"}   # tiny samples: no automatic rerun on a long one
 
 
