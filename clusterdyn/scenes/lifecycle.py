@@ -63,6 +63,10 @@ class Stage:
         Attached to the dynamics for the stage (e.g. a free-surface velocity probe).
     observables : dict, optional
         H5MD observables ``{name: (callable(atoms) -> value, unit)}``.
+    stop : callable, optional
+        ``stop(dyn) -> bool`` after every analysis frame: True ends the stage
+        before ``nsteps`` (a run that stops when its physics is over; ``nsteps``
+        is then the most it may take).
     """
 
     name: str
@@ -76,6 +80,7 @@ class Stage:
     observers: list = field(default_factory=list)
     observables: dict = None
     t_run: float = 0.0
+    stop: object = None
 
 
 def check_out(out):
@@ -305,7 +310,7 @@ class SceneDef:
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
-                                      save=lambda path: save_run(path, dyn, extra()))
+                                      save=lambda path: save_run(path, dyn, extra()), stop=stage.stop)
         finally:
             if writer is not None:
                 writer.close()
