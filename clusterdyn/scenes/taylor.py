@@ -7,9 +7,13 @@ for no slip).  The run stops when the rod has stopped deforming:
 
 * its centre-of-mass velocity toward the wall is below 1% of V, or reversed
   (a rebound), **and**
-* its length changed by less than 0.1% of L0 over the last 5 us
-  (in CD plastic work becomes cluster vibration, so the kinetic energy never
-  falls to zero and cannot serve as the criterion),
+* its length changed by less than 0.1% of L0 over the last 5 us (in CD
+  plastic work becomes cluster vibration, so the kinetic energy never falls
+  to zero and cannot serve as the criterion), **or** the rod rebounded and has
+  been off the wall (no cluster within the wall's reach) for the last 5 us: a
+  free rod does no more plastic work, while its length keeps ringing
+  elastically for a long time (amplitude ``L_ringing``, the spread of the
+  length over the last 5 us, reported with the result),
 
 checked every 0.5 us, or at ``t_max`` (default: ``2 rho0 V L0 / (0.3 GPa) +
 20 L0/c0``, the time a rod of 0.3 GPa yield stress needs to stop plus ten
@@ -218,7 +222,8 @@ class TaylorRecord:
         self.ax = int(info["axis"])
         self.r0, self.V, self.L0 = info["r0"], info["V"], info["L_init"]
         self.m = atoms.get_masses()
-        self.t, self.L, self.vz, self.ek = [], [], [], []
+        self.wall_z, self.reach = info["wall_z"], 0.5 * self.r0
+        self.t, self.L, self.vz, self.ek, self.contact = [], [], [], [], []
         self.reason = ""
 
     def frame(self, d):
@@ -228,27 +233,35 @@ class TaylorRecord:
         self.L.append(float(np.ptp(z) + self.r0))
         self.vz.append(float(p.sum() / self.m.sum()))
         self.ek.append(float(d.get_kinetic_energy()))
+        self.contact.append(bool(z.min() - self.wall_z < self.reach))
 
     def stop(self, d):
         t = np.asarray(self.t)
         if len(t) < 2 or t[-1] < STOP_WINDOW:
             return False
         slow = -self.vz[-1] < STOP_SPEED * self.V
-        recent = np.asarray(self.L)[t >= t[-1] - STOP_WINDOW - 1e-9 * t[-1]]
+        win = t >= t[-1] - STOP_WINDOW - 1e-9 * t[-1]
+        recent = np.asarray(self.L)[win]
         steady = np.ptp(recent) < STOP_LENGTH * self.L0
-        if slow and steady:
+        free = self.vz[-1] > 0 and not np.any(np.asarray(self.contact)[win])
+        if slow and (steady or free):
+            why = (f"length within {100 * np.ptp(recent) / self.L0:.3g}% over the last "
+                   f"{STOP_WINDOW / units.us:g} us" if steady else
+                   f"rebounded, off the wall for the last {STOP_WINDOW / units.us:g} us (length ringing "
+                   f"{100 * np.ptp(recent) / self.L0:.3g}%)")
             self.reason = (f"stopped deforming at {t[-1] / units.us:.4g} us: centre-of-mass velocity "
-                           f"{-self.vz[-1] / units.m_s:+.3g} m/s toward the wall, length within "
-                           f"{100 * np.ptp(recent) / self.L0:.3g}% over the last {STOP_WINDOW / units.us:g} us")
-        return slow and steady
+                           f"{-self.vz[-1] / units.m_s:+.3g} m/s toward the wall, {why}")
+            return True
+        return False
 
     def get_state(self):
         return {"t": list(self.t), "L": list(self.L), "vz": list(self.vz), "ek": list(self.ek),
-                "reason": self.reason}
+                "contact": list(self.contact), "reason": self.reason}
 
     def set_state(self, st):
         for k in ("t", "L", "vz", "ek"):
             setattr(self, k, [float(x) for x in st[k]])
+        self.contact = [bool(x) for x in st["contact"]]
         self.reason = str(st.get("reason", ""))
 
 
@@ -351,6 +364,10 @@ class TaylorScene(SceneDef):
         hist = sm["history"]
         t_end = hist["t"][-1] if hist["t"] else 0.0
         q["t_end"] = Quantity(t_end / units.us, "us", note="time the run ended")
+        tt = np.asarray(hist["t"])
+        ring = np.asarray(hist["L"])[tt >= t_end - STOP_WINDOW] if len(tt) else np.zeros(1)
+        q["L_ringing"] = Quantity(float(np.ptp(ring)) / info["L_init"], "", note="spread of the length over the "
+                                  "last 5 us / L0 (elastic ringing: the uncertainty of Lf from final positions)")
         q["v_com_end"] = Quantity(-sm["v_end"] / units.m_s, "m/s", note="centre-of-mass velocity toward the wall "
                                   "at the end (negative: rebound)")
         lq, lnote = ledger_quantities(sm["ledger"])
