@@ -123,7 +123,8 @@ def main():
     lines = ["# multilayer: clusterdyn vs LAMMPS (2 ranks)", "",
              f"r0 = {res['r0_mm']:g} mm; clusterdyn wall {res['cd_wall_s']:.0f} s, LAMMPS wall "
              f"{res['lammps_wall_s']:.0f} s on {res['ranks']} ranks", "",
-             "| layer | material | clusterdyn hole (mm) | LAMMPS hole (mm) | difference (r0) |", "|---|---|---|---|---|"]
+             "| layer | material | clusterdyn hole (mm) | LAMMPS hole (mm) | difference (r0) |",
+             "|---|---|---|---|---|"]
     for x in res["layers"]:
         diff = "" if x["diff_r0"] is None else f"{x['diff_r0']:.2f}"
         lines.append(f"| {x['layer']} | {x['material']} | {x['cd_mm']:.3g} | {x['lammps_mm']:.3g} | {diff} |")

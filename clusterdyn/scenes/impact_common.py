@@ -69,6 +69,18 @@ def radiograph(positions, masses, axes, extent, pixel):
     return (img / (units.kg / units.m ** 2)).astype(np.float32), eh, ev
 
 
+def radiograph_frame(positions, masses, axis, lateral, radius, r0, t, pixels=(300, 500)):
+    """A radiograph frame dict (``t``, ``image``, ``edges_h``, ``edges_v``) of the plane of ``lateral``
+    (horizontal) and ``axis`` (vertical), framing the body of ``radius`` and 99.9% of the particles."""
+    pos = np.asarray(positions)
+    half = max(radius, float(np.quantile(np.abs(pos[:, lateral]), 0.999))) + 2 * r0
+    z = pos[:, axis]
+    ext = [[-half, half], [float(np.quantile(z, 0.0005)) - 2 * r0, float(np.quantile(z, 0.9995)) + 2 * r0]]
+    pixel = max(r0, 2 * half / pixels[0], (ext[1][1] - ext[1][0]) / pixels[1])
+    img, eh, ev = radiograph(pos, masses, (lateral, axis), ext, pixel)
+    return {"t": float(t), "image": img, "edges_h": eh, "edges_v": ev}
+
+
 def write_radiographs(frames, png, csv_path, labels=("x", "z"), title=""):
     """Radiograph panels (one per time) as a PNG and the images behind it as CSV.
 

@@ -50,7 +50,7 @@ from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import thermal_noise
-from .impact_common import (IMPACT_J, announce_cost, ledger, ledger_quantities, parse_times, radiograph,
+from .impact_common import (IMPACT_J, announce_cost, ledger, ledger_quantities, parse_times, radiograph_frame,
                             retry_halved_dt, write_radiographs)
 from .lifecycle import SceneDef, Stage, scene_params
 
@@ -170,15 +170,8 @@ class StackRecord:
             self.images.append(self.image(t))
 
     def image(self, t):
-        ax, r0 = self.ax, self.info["r0"]
-        pos = self.atoms.positions
-        h = _lateral(ax)[0]
-        half = max(self.info["radius"], float(np.quantile(np.abs(pos[:, h]), 0.999))) + 2 * r0
-        z = pos[:, ax]
-        ext = [[-half, half], [float(np.quantile(z, 0.0005)) - 2 * r0, float(np.quantile(z, 0.9995)) + 2 * r0]]
-        pixel = max(r0, (ext[1][1] - ext[1][0]) / 500.0, 2 * half / 300.0)
-        img, eh, ev = radiograph(pos, self.m, (h, ax), ext, pixel)
-        return {"t": t, "image": img, "edges_h": eh, "edges_v": ev}
+        return radiograph_frame(self.atoms.positions, self.m, self.ax, _lateral(self.ax)[0], self.info["radius"],
+                                self.info["r0"], t)
 
     def get_state(self):
         return {"rows": [dict(r) for r in self.rows], "images": [dict(i) for i in self.images],
