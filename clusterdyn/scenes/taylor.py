@@ -58,7 +58,7 @@ from ..analysis.impact import (axial_outline, find_taylor_test, outline_deviatio
                                taylor_outline, taylor_yield)
 from ..build import parse_axis
 from ..build.bodies import rod
-from ..calculators import ClusterDynamics
+from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import cd_material_names, get_material
 from ..md import DampedVerlet
@@ -87,12 +87,14 @@ OUTLINE_Q = 98.0
 T_MAX_YIELD = 0.3 * units.GPa
 
 #: Packings of the rod: porosity (target, 1 - rho/rho0), grain size (equal-volume diameter, Angstrom),
-#: cutoff rc (in r0).  "paper": the CD paper's Taylor rods (module docstring).
+#: cutoff rc (in r0), grain boundaries ("bonded": boundary pairs attract like any pair; "repulsive":
+#: set-up bonds inside grains only, pairs across a boundary only repel).  "paper": the CD paper's
+#: Taylor rods (module docstring).
 #: FLOW-STRESS PICK: the packing the flow-stress study picks for 6061-T6 (0.3-0.4 GPa) is to be added
-#: here as PACKINGS["flow"] = {"porosity": ..., "grain_size": ... * units.mm, "rc": ...} once that study
-#: is merged; the scene's `packing` choice lists every key of this dict.
+#: here as PACKINGS["flow"] = {"porosity": ..., "grain_size": ... * units.mm, "rc": ..., "boundaries": ...}
+#: once that study is merged; the scene's `packing` choice lists every key of this dict.
 PACKINGS = {
-    "paper": {"porosity": 0.14, "grain_size": 1.14 * units.mm, "rc": 1.15},
+    "paper": {"porosity": 0.14, "grain_size": 1.14 * units.mm, "rc": 1.15, "boundaries": "bonded"},
 }
 
 CD_MATERIALS = tuple(cd_material_names())
@@ -111,6 +113,9 @@ PARAMS = [
     Param("grain_size", None, "grain size, the equal-volume diameter (none = the packing's or 3.2 r0 if "
           "larger)", unit="mm", low=0.0, low_open=True, optional=True),
     Param("rc", None, "cutoff as a multiple of r0 (none = the packing's)", low=1.0, high=1.414, low_open=True,
+          optional=True),
+    Param("boundaries", None, "grain boundaries: bonded (attract like any pair) or repulsive (set-up bonds "
+          "inside grains only); none = the packing's", kind="choice", choices=("bonded", "repulsive"),
           optional=True),
     Param("mass", "cluster", "cluster masses: 'cluster' keeps the material's (a porous rod is lighter), "
           "'dense' scales them to the full-density rod", kind="choice", choices=("cluster", "dense")),
@@ -135,10 +140,11 @@ PARAMS = [
 
 # --------------------------------------------------------------------------- set-up
 def taylor_packing(v, r0):
-    """(porosity, grain size, rc, notes) of a parameter set at cluster size ``r0``."""
+    """(porosity, grain size, rc, boundaries, notes) of a parameter set at cluster size ``r0``."""
     pk = PACKINGS[v["packing"]]
     por = pk["porosity"] if v["porosity"] is None else v["porosity"]
     rc = pk["rc"] if v["rc"] is None else v["rc"]
+    bnd = pk["boundaries"] if v.get("boundaries") is None else v["boundaries"]
     notes = []
     if v["grain_size"] is None:
         g = pk["grain_size"]
@@ -149,7 +155,7 @@ def taylor_packing(v, r0):
             g = MIN_GRAIN_R0 * r0
     else:
         g = v["grain_size"]
-    return por, g, rc, notes
+    return por, g, rc, bnd, notes
 
 
 def taylor_r0(v):
@@ -162,13 +168,17 @@ def build_taylor(v):
     D0, L0, V = v["D0"], v["L0"], v["V"]
     r0 = taylor_r0(v)
     ax = parse_axis(v["axis"])
-    por, grain, rc, notes = taylor_packing(v, r0)
+    por, grain, rc, bnd, notes = taylor_packing(v, r0)
     center = np.zeros(3)
     center[ax] = 0.5 * L0
     atoms = rod(mat, r0, L0, D0, axis=ax, center=center, grain_size=grain, seed=v["seed"],
                 target_porosity=por, mass=v["mass"])
     body = dict(atoms.info["bodies"][0])
-    calc = ClusterDynamics(rc=rc)
+    if bnd == "repulsive":
+        mark_initial_bonds(atoms, rc=rc, within="grain")
+        calc = ClusterDynamics(rc=rc, attraction="initial")
+    else:
+        calc = ClusterDynamics(rc=rc)
     atoms.calc = calc
     relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
     atoms.set_momenta(np.zeros((len(atoms), 3)))
@@ -205,7 +215,7 @@ def build_taylor(v):
     info = {"r0": r0, "L0": L0, "D0": D0, "V": V, "axis": ax, "dt": dt, "nsteps": int(math.ceil(t_max / dt)),
             "t_max": t_max, "wall_z": float(point[ax]), "L_init": L_init, "offset": offset,
             "outline_noise": noise_outline, "rho": rho, "rho0": float(mat.rho0), "c0": float(pot.c0),
-            "porosity_target": por, "grain_size": grain, "rc": rc, "notes": notes,
+            "porosity_target": por, "grain_size": grain, "rc": rc, "boundaries": bnd, "notes": notes,
             "body": {k: b for k, b in body.items() if k in ("n_clusters", "porosity", "n_grains", "d_min_r0",
                                                            "mass_choice", "mass_factor", "density_g_cm3")},
             "relax_min_r": None if relax is None else float(relax["min_r_over_r0"]),
@@ -304,7 +314,7 @@ class TaylorScene(SceneDef):
                              "(a rod a few clusters across)")
         if v["L0"] < 4.0 * r0:
             raise InputError("L0", f"{v['L0'] / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
-        por, g, rc, _ = taylor_packing(v, r0)
+        por, g, rc, bnd, _ = taylor_packing(v, r0)
         if g < 3.0 * r0:
             raise InputError("grain_size", f"{g / units.mm:g}mm", f"at least 3 r0 = {3 * r0 / units.mm:.4g} mm "
                              "(the smallest grain of the polycrystal builder)")
@@ -381,7 +391,8 @@ class TaylorScene(SceneDef):
         notes.append(f"rod: {sm['n']} clusters, r0 = {info['r0'] / units.mm:.4g} mm = D0/{D0 / info['r0']:.3g}, "
                      f"{body['n_grains']} grains of {info['grain_size'] / units.mm:.3g} mm = "
                      f"{info['grain_size'] / info['r0']:.3g} r0, porosity {100 * body['porosity']:.1f}% "
-                     f"(d_min {body['d_min_r0']:.3f} r0), rc {info['rc']:g}, masses '{body['mass_choice']}' "
+                     f"(d_min {body['d_min_r0']:.3f} r0), rc {info['rc']:g}, {info.get('boundaries', 'bonded')} grain "
+                     f"boundaries, masses '{body['mass_choice']}' "
                      f"(density {info['rho'] / units.g_cm3:.3f} g/cm3), wall {v['wall']}, J {v['J']}")
         notes.append(f"relaxed at rest ({info['relax_steps']} steps): length {info['L_init'] / units.mm:.4g} mm "
                      f"(nominal {L0 / units.mm:g}); outline offset {info['offset'] / info['r0']:+.3f} r0, outline "
