@@ -90,7 +90,8 @@ PARAMS = [
     Param("sphere_material", "Al-2024", "material of the sphere (Al-2024 stands for 2017-T4)", kind="choice",
           choices=CD_MATERIALS),
     Param("plate_material", "Al-6061-T6", "material of the plate", kind="choice", choices=CD_MATERIALS),
-    Param("t_end", 12.0, "run time after contact", unit="us", low=0.0, low_open=True),
+    Param("t_end", 8.0, "run time after contact (the hole is stable from about 3 us on)", unit="us", low=0.0,
+          low_open=True),
     Param("image_times", "auto", "radiograph times in us, comma separated, or auto (t_end/4, t_end/2, 3 t_end/4, "
           "t_end)", kind="str"),
     Param("J", IMPACT_J, "damping Gamma = c0/(J r0); none = off (default 50: free surfaces, fragments)",
