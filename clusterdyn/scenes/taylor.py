@@ -24,13 +24,16 @@ that broke away are counted and left out), ``clusterdyn.analysis.impact``:
 the outline r(z) (per slab of width r0 along the axis, the 98th percentile
 of the clusters' radial distances, plus the offset that makes the undeformed
 rod's outline D0/2, measured on the relaxed rod before the impact), the
-final length Lf (from the wall plane to the rear face: the rear clusters'
+final length Lf (from the impact face to the rear face: the end clusters'
 centres plus r0/2), the undeformed length X (rear part within 2% of D0/2),
 the largest diameter Df, the diameter W at 0.2 L0 from the impact face and
 Taylor's yield estimate; against the test of the same L0, D0 and V in
 ``clusterdyn/data/taylor_6061t6.csv`` (room temperature) and its outline.
-Lf/L0 is the ratio of the rod's measured lengths after and before the
-impact (the same rule both times).
+Lengths along the axis are taken in the nominal rod's scale: the relaxed
+rod (``L_init``, a little longer than L0: the as-built polycrystal expands
+as it relaxes) is scaled to L0, so Lf/L0 is the ratio of the rod's
+measured lengths after and before the impact (the same rule both times), as
+is the outline's radius through its calibration.
 
 **Packing.**  The default follows the CD paper's Taylor rods: a polycrystal of
 about 14% porosity (the paper's 2.32 g/cm3 of 2.71) with grains of 1.14 mm
@@ -286,14 +289,12 @@ def analyse_rod(sm):
     face = p[:, ax].min() - 0.5 * r0               # the impact face (the rod may have rebounded)
     out = axial_outline(p, ax, r0, q=OUTLINE_Q, lo=face)
     r = out["r"] + info["offset"]
-    z = out["z"] - face
-    top = p[:, ax].max() + 0.5 * r0 - face
+    # lengths in the nominal rod's scale: the relaxed rod is L_init long (its radius is calibrated by the offset)
+    scale = L0 / info["L_init"]
+    z = (out["z"] - face) * scale
+    top = (p[:, ax].max() + 0.5 * r0 - face) * scale
     m = taylor_measures(z, r, L0, D0, top=top)
-    # Lf/L0: measured length after / before (same rule: end clusters' centres plus r0)
-    L_final = float(np.ptp(p[:, ax]) + r0)
-    m["Lf_over_L0"] = L_final / info["L_init"]
-    m["Lf"] = m["Lf_over_L0"] * L0
-    m["X"] = min(m["X"], m["Lf"])
+    m["Lf_over_L0"] = m["Lf"] / L0           # = final / initial measured length (end clusters' centres + r0)
     m["z"], m["r"] = z, r
     m["Y"] = taylor_yield(info["rho"], info["V"], L0, m["Lf"], m["X"])
     return m
@@ -421,7 +422,11 @@ class TaylorScene(SceneDef):
         outline = taylor_outline(test["name"]) if test is not None and test["has_outline"] else None
         files = write_outline(out, m, info, outline, test)
         files += write_history(out, sm)
-        return files
+        final = out / "taylor_final.npz"             # the final rod, for analyses after the run
+        np.savez_compressed(final, positions_A=np.asarray(sm["positions"], dtype=np.float32),
+                            main=np.asarray(sm["main"], bool), axis=info["axis"], r0_A=info["r0"],
+                            L_init_A=info["L_init"], offset_A=info["offset"])
+        return files + [final]
 
 
 def write_outline(out, m, info, outline, test):
