@@ -125,10 +125,14 @@ def taylor_measures(z, r, L0, D0, *, face=0.0, top=None):
     -------
     dict
         ``Lf`` (rear face - impact face), ``X`` (undeformed rear length: from
-        the rear face down to the centre of the highest slab whose radius
-        exceeds ``(1 + 0.02) D0/2``; ``Lf`` if none does), ``Df`` (twice the
-        largest radius), ``W`` (twice the radius at ``0.2 L0`` from the impact
-        face, interpolated), all Angstrom.
+        the rear face down to the lower edge of the first slab, counted from
+        the impact face, that starts a stretch of ``D0/2`` whose radii all
+        stay within ``(1 + 0.02) D0/2``: the deformed zone is what lies below
+        it, and neither noise in the outline nor a small flare at the rear
+        end moves X; ``Lf`` if the outline is within the tolerance from the
+        impact face on, 0 if no such stretch exists), ``Df`` (twice the
+        largest radius), ``W`` (twice the radius at ``0.2 L0`` from the
+        impact face, interpolated), all Angstrom.
     """
     z = np.asarray(z, dtype=float)
     r = np.asarray(r, dtype=float)
@@ -139,8 +143,13 @@ def taylor_measures(z, r, L0, D0, *, face=0.0, top=None):
     w = z[1] - z[0] if len(z) > 1 else 0.0
     top = z[-1] + 0.5 * w if top is None else float(top)
     Lf = top - face
-    wide = np.nonzero(r > (1.0 + UNDEFORMED_TOL) * 0.5 * D0)[0]
-    X = top - z[wide[-1]] if len(wide) else Lf
+    ok_r = r <= (1.0 + UNDEFORMED_TOL) * 0.5 * D0
+    run = max(1, int(math.ceil(0.5 * D0 / w))) if w > 0 else 1
+    X = 0.0
+    for k in range(len(z)):
+        if ok_r[k:k + run].all() and k + run <= len(z):
+            X = top - (z[k] - 0.5 * w) if k else Lf
+            break
     zW = face + W_AT * L0
     W = 2.0 * float(np.interp(zW, z, r)) if z[0] <= zW <= z[-1] else float("nan")
     return {"Lf": float(Lf), "X": float(min(X, Lf)), "Df": 2.0 * float(r.max()), "W": W}
