@@ -425,7 +425,8 @@ class TaylorScene(SceneDef):
         final = out / "taylor_final.npz"             # the final rod, for analyses after the run
         np.savez_compressed(final, positions_A=np.asarray(sm["positions"], dtype=np.float32),
                             main=np.asarray(sm["main"], bool), axis=info["axis"], r0_A=info["r0"],
-                            L_init_A=info["L_init"], offset_A=info["offset"])
+                            L_init_A=info["L_init"], offset_A=info["offset"], L0_A=info["L0"], D0_A=info["D0"],
+                            V_ase=info["V"], rho_ase=info["rho"])
         return files + [final]
 
 
