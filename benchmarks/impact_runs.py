@@ -76,6 +76,40 @@ def _err(a, b):
     return f"{100 * (a - b) / abs(b):+.1f}%"
 
 
+def taylor_measures_now(runs, name, d):
+    """The Taylor measures recomputed with the present analysis from the run's taylor_final.npz
+    (None without it): Lf/L0, X/L0, Df/D0, W/D0, outline deviation, Y (GPa)."""
+    import re
+
+    import numpy as np
+
+    from clusterdyn import units
+    from clusterdyn.analysis.impact import find_taylor_test, outline_deviation, taylor_outline
+    from clusterdyn.scenes.taylor import analyse_rod
+    p = Path(runs) / name / "taylor_final.npz"
+    if not p.exists():
+        return None
+    z = np.load(p)
+    par = d["params"]
+    L0 = float(z["L0_A"]) if "L0_A" in z else par["L0"]["value"] * units.mm
+    D0 = float(z["D0_A"]) if "D0_A" in z else par["D0"]["value"] * units.mm
+    V = float(z["V_ase"]) if "V_ase" in z else par["V"]["value"] * units.m_s
+    if "rho_ase" in z:
+        rho = float(z["rho_ase"])
+    else:
+        rho = float(re.search(r"density ([0-9.]+) g/cm3", " ".join(d["notes"])).group(1)) * units.g_cm3
+    info = {"axis": int(z["axis"]), "r0": float(z["r0_A"]), "D0": D0, "L0": L0, "offset": float(z["offset_A"]),
+            "L_init": float(z["L_init_A"]), "rho": rho, "V": V}
+    m = analyse_rod({"info": info, "positions": z["positions_A"].astype(float), "main": z["main"]})
+    out = {"Lf_over_L0": m["Lf_over_L0"], "X_over_L0": m["X"] / L0, "Df_over_D0": m["Df"] / D0,
+           "W_over_D0": m["W"] / D0, "Y_taylor": m["Y"] / units.GPa}
+    test = find_taylor_test(L0, D0, V)
+    if test is not None and test["has_outline"]:
+        ze, re_ = taylor_outline(test["name"])
+        out["outline_deviation"] = outline_deviation(m["z"], m["r"], ze, re_, D0)
+    return out
+
+
 def taylor_table(runs):
     rows = ["| test | V (m/s) | L0 (mm) | Lf/L0 CD / exp (err) | X/L0 CD / exp | Df/D0 CD / exp | W/D0 CD / exp "
             "| outline dev. | Y_Taylor CD / exp (GPa) | rebound (m/s) | t_end (us) | clusters | wall (s) |",
@@ -86,11 +120,15 @@ def taylor_table(runs):
             rows.append(f"| {name} | {V} | {L0} | pending | | | | | | | | | |")
             continue
         cells = [name.replace("tay_", "") + (f" ({extra.replace('--set ', '')})" if extra else ""), str(V), str(L0)]
+        now = taylor_measures_now(runs, name, d) or {}
+
+        def val(k):
+            return now.get(k, _v(d, k))
         for k in ("Lf_over_L0", "X_over_L0", "Df_over_D0", "W_over_D0"):
-            a, b = _v(d, k), _r(d, k)
+            a, b = val(k), _r(d, k)
             cells.append(f"{_f(a)} / {_f(b)}" + (f" ({_err(a, b)})" if k == "Lf_over_L0" else ""))
-        cells.append(_f(_v(d, "outline_deviation")))
-        cells.append(f"{_f(_v(d, 'Y_taylor'), '.2f')} / {_f(_r(d, 'Y_taylor'), '.2f')}")
+        cells.append(_f(val("outline_deviation")))
+        cells.append(f"{_f(val('Y_taylor'), '.2f')} / {_f(_r(d, 'Y_taylor'), '.2f')}")
         cells.append(_f(-_v(d, "v_com_end"), ".0f"))
         cells.append(_f(_v(d, "t_end"), ".1f"))
         cells.append(str(d.get("extra", {}).get("n_clusters", "-")))

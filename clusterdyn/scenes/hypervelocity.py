@@ -28,7 +28,8 @@ Measured (``clusterdyn.analysis.impact``), every 0.25 us and at the end:
   face moving backward (against the sphere's flight); theta is the
   half-angle about the plate normal, apex at the impact point, of the cone
   holding 90% of their mass; its complement 90 deg - theta is the cone's
-  angle to the plate plane (the CD paper does not say which it quotes);
+  angle to the plate plane (the CD paper does not say which it quotes); the
+  cone holding half the mass is reported too (``ejecta_median_angle_to_plane``);
 * **debris cloud**: clusters more than r0 behind the plate's rear face
   moving forward; its leading edge is the 99.9th percentile of their
   distance from the rear face (single strays do not count), the length is
@@ -177,7 +178,7 @@ class HyperRecord:
         deb = (z < info["z_rear"] - r0) & (vz < 0)
         row = {"t": t, "hole_d": hole["d"], "hole_area": hole["area"], "n_debris": int(deb.sum()),
                "lead": np.nan, "tail": np.nan, "cloud_d": np.nan, "n_ejecta": 0, "ejecta_mass": 0.0,
-               "theta": np.nan}
+               "theta": np.nan, "theta50": np.nan}
         if deb.sum() >= 10:
             dist = info["z_rear"] - z[deb]
             lat = pos[deb][:, self.lat]
@@ -191,6 +192,7 @@ class HyperRecord:
             n = np.zeros(3)
             n[ax] = 1.0
             row["theta"] = cone_half_angle(pos[ej] - apex, self.m[ej], n, CONE_FRACTION)
+            row["theta50"] = cone_half_angle(pos[ej] - apex, self.m[ej], n, 0.5)
             row["n_ejecta"] = int(ej.sum())
             row["ejecta_mass"] = float(self.m[ej].sum())
         return row
@@ -305,6 +307,9 @@ class HypervelocityScene(SceneDef):
                                           "backward ejecta mass"),
             "ejecta_angle_to_plane": Quantity(90.0 - math.degrees(theta), "deg", exp_th,
                                               note="the same cone's angle to the plate plane"),
+            "ejecta_median_angle_to_plane": Quantity(90.0 - math.degrees(last["theta50"]), "deg",
+                                                     note="angle to the plate plane of the cone holding half "
+                                                     "the backward ejecta mass"),
             "ejecta_mass": Quantity(last["ejecta_mass"] / units.g, "g", note="mass ejected backward"),
             "cloud_lead_speed": Quantity(u_lead / units.km_s, "km/s", note="debris cloud leading edge, fit over "
                                          "the second half (no reference data)"),
