@@ -25,7 +25,7 @@ _STEPPED = []
 
 
 def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkpoint=None,
-               checkpoint_every=0, save=None):
+               checkpoint_every=0, save=None, stop=None):
     """Run up to step ``nsteps``, calling ``on_frame(dyn)`` every ``nsteps/nframes`` steps.
 
     The frame at step 0 is taken unless the dynamics is resumed (``dyn.nsteps > 0``:
@@ -33,7 +33,9 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
     frames (0 = never) ``save(checkpoint)`` writes the full state.  Shows one
     tqdm bar over all steps with time left when ``progress``; the first step of
     a process says "compiling kernels, first run only" while numba compiles
-    (or loads its on-disk cache).  Returns the wall time of the stepping alone.
+    (or loads its on-disk cache).  ``stop(dyn)``, if given, is asked after
+    every frame; True ends the run there.  Returns the wall time of the
+    stepping alone.
     """
     every = max(1, int(round(nsteps / max(1, nframes))))
     bar = None
@@ -69,6 +71,8 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
             done += k
             on_frame(dyn)
             nframe += 1
+            if stop is not None and stop(dyn):
+                break
             if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
                 save(checkpoint)
     finally:

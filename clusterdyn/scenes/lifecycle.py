@@ -65,6 +65,10 @@ class Stage:
         H5MD observables ``{name: (callable(atoms) -> value, unit)}``.
     per_particle : dict, optional
         H5MD per-particle data ``{name: callable(atoms) -> (N, ...) array}``.
+    stop : callable, optional
+        ``stop(dyn) -> bool`` after every analysis frame: True ends the stage
+        before ``nsteps`` (a run that stops when its physics is over; ``nsteps``
+        is then the most it may take).
     """
 
     name: str
@@ -79,6 +83,7 @@ class Stage:
     observables: dict = None
     t_run: float = 0.0
     per_particle: dict = None
+    stop: object = None
 
 
 def check_out(out):
@@ -313,7 +318,7 @@ class SceneDef:
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
-                                      save=lambda path: save_run(path, dyn, extra()))
+                                      save=lambda path: save_run(path, dyn, extra()), stop=stage.stop)
         finally:
             if writer is not None:
                 writer.close()
