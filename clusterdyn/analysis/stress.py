@@ -1,6 +1,6 @@
 """Virial stress of clusters (CD eq. 3) and the von Mises stress intensity (CD eq. 4).
 
-physics.md 1.4: the virial of particle a (energy units, tension positive) is
+docs/theory.md 1.4: the virial of particle a (energy units, tension positive) is
 
 .. math::
 

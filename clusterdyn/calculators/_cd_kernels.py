@@ -44,7 +44,7 @@ coefficients of the shifted pair energy in bin k of a grid uniform in
 1/r0_ab^2, E(cutoff), r0_ab^2).  The pair force is ``-2 dE/ds`` times the
 separation vector: no square root or division in the loop.
 
-``attraction="initial"`` (physics.md 1.5): a pair not listed in ``bonds_nk``
+``attraction="initial"`` (docs/theory.md 1.5): a pair not listed in ``bonds_nk``
 (partner ids bonded at set-up, -1 padded, one row per particle, caller's
 order) only repels: zero force beyond r0_ab and energy ``E(r) - E(r0_ab)``
 inside, so it stays conservative.

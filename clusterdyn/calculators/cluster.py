@@ -125,7 +125,7 @@ class ClusterDynamics(Calculator):
     attraction : "all" or "initial"
         ``"initial"``: attraction only between pairs bonded at set-up
         (``atoms.arrays['bonds0']``, see :func:`mark_initial_bonds`); pairs that
-        come within the cutoff later only repel (physics.md 1.5 remedy for the
+        come within the cutoff later only repel (docs/theory.md 1.5 remedy for the
         soft response at u ~ 2 km/s).
 
     """

@@ -1,4 +1,4 @@
-"""Export a Cluster Dynamics scene to LAMMPS and run it there (scale-out, DESIGN.md).
+"""Export a Cluster Dynamics scene to LAMMPS and run it there (scale-out beyond one machine, docs/lammps.md).
 
 :func:`export_lammps` writes a folder that LAMMPS runs as it is:
 

@@ -1,6 +1,6 @@
 """The MCA calculator (ASE): forces, torques and automaton stresses from positions and pair state.
 
-physics.md 2.2-2.5.  The calculator evaluates the *trial* (elastic predictor)
+docs/theory.md 2.2-2.5.  The calculator evaluates the *trial* (elastic predictor)
 state at the current positions from the committed state held by an
 :class:`~clusterdyn.mca.state.MCAState`: the increments of elongation and of
 objective tangential displacement since the last commit, split between the

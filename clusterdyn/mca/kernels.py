@@ -1,6 +1,6 @@
-"""numba kernels of the MCA force evaluation (physics.md 2.2-2.5).
+"""numba kernels of the MCA force evaluation (docs/theory.md 2.2-2.5).
 
-Naming follows STYLE.md: ``_n`` per automaton, ``_p`` per pair, ``_p2`` per
+Naming (shape suffixes): ``_n`` per automaton, ``_p`` per pair, ``_p2`` per
 pair side (0: side of automaton i, 1: side of j), ``_c`` Cartesian.
 Pairs are stored once (i < j by id); the separation is
 ``d = x_j - x_i`` (minimum image across periodic axes), ``n = d / r``.
@@ -52,7 +52,7 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
     Outputs: ``d_pc`` separation, ``r_p`` distance, ``dr_p = r - r_last``,
     ``arm_p2`` lever arms (``r`` split as q0: they sum to r, so torques conserve angular momentum),
     ``dtau_pc`` tangential increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)``
-    (physics.md 2.4) from the objective relative displacement of the two
+    (docs/theory.md 2.4) from the objective relative displacement of the two
     material points that were at the contact point at the last commit,
     ``du = d - (a_i R_i + a_j R_j) n_last`` (zero for any rigid motion),
     ``taurot_p2c`` the stored tangential forces rotated with the pair (minimal
@@ -133,13 +133,13 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
 
 @njit(cache=True)
 def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
-    """Split the elongation between the two automata (physics.md 2.4).
+    """Split the elongation between the two automata (docs/theory.md 2.4).
 
     ``d eps_i = [A_j dr + q0_j (dB_j - dB_i)] / (A_i q0_j + A_j q0_i)`` with
     ``A = 2G`` and ``dB = (1 - 2G/3K) dP``; unlinked pairs get zero.  The
     calculator passes ``dB = 0``: the mean-stress terms are balanced in the pair
     force instead (stiffness-weighted mean of the sides).  The lagged dB
-    correction of physics.md 2.4 is a Jacobi iteration on P whose gain on the
+    correction of docs/theory.md 2.4 is a Jacobi iteration on P whose gain on the
     checkerboard mode is about ``z (1 - 2G/3K) K / 4G`` (z neighbours): it
     diverged for nu >= 0.3 in our tests, so it is not used (docs/mca.md).
     """

@@ -1,4 +1,4 @@
-"""Scenes ``plate-impact`` and ``polycrystal-shock`` (physics.md 1.4, 1.7).
+"""Scenes ``plate-impact`` and ``polycrystal-shock`` (docs/theory.md 1.4, 1.7).
 
 ``plate-impact``: two aluminium plates, free along x and periodic across,
 collide at a relative speed ``v`` (each moves at v/2 toward the other, the

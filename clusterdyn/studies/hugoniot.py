@@ -68,7 +68,7 @@ class SizeParam(Param):
         return Param(self.name, (1, 1, 1), self.doc, kind="ints").parse(value)
 
 #: longitudinal sound speed of the nearest-neighbour fcc lattice along the shock direction, in c0
-#: (physics.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
+#: (docs/theory.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
 LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
 LATTICE_MODULUS = {"100": "C11 = 3/2", "110": "15/8", "111": "2"}
 
@@ -421,7 +421,7 @@ def _low_u(rows, mat, sv, two):
                              f"above the experimental Hugoniot's intercept ({ref.name}: {ref.c0_km_s:g} km/s) and "
                              f"{D0 / c0 - 1:+.1%} above the bulk sound speed c0 (a nearest-neighbour central-force "
                              f"lattice has rho c_L^2 = {LATTICE_MODULUS[sv['direction']]} K along "
-                             f"[{sv['direction']}], physics.md 1.5)")
+                             f"[{sv['direction']}], docs/theory.md 1.5)")
             except InputError:
                 lines.append(f"the lattice is stiffer than the material at low u: D0 is {D0 / c0 - 1:+.1%} above "
                              "the bulk sound speed c0")

@@ -8,7 +8,7 @@ degrading unload-reload cycle (and helpers the tests reuse).
 shear modulus measured on fcc, hcp, simple cubic and random packings for
 nu in {0, 0.15, 0.25, 0.35, 0.45} against the input, then the same test on a
 Cluster Dynamics fcc packing of aluminium along [100] and [111] against the
-nearest-neighbour central-force values (physics.md 1.5), and writes both as
+nearest-neighbour central-force values (docs/theory.md 1.5), and writes both as
 CSV and Markdown under ``DIR`` (default ``runs/mca-elasticity-size5``).  ``degrading`` runs a
 load / unload / reload cycle of concrete and writes the curve (CSV, PNG) with
 the fitted initial and unloading moduli.
@@ -237,7 +237,7 @@ def cd_elastic_constants(material="Al", r0=5 * units.um, direction=(1, 0, 0), st
     more than r0 from the free faces.  From the (6, 6) lab stiffness:
     uniaxial stress along x (``S = C^-1``, ``E = 1/S_xx``, ``nu = -S_yx/S_xx``),
     ``B`` from the hydrostatic strain, and the cubic constants in the crystal
-    axes.  Analytic (physics.md 1.5): ``C11 = 2k/a``, ``C12 = C44 = k/a``,
+    axes.  Analytic (docs/theory.md 1.5): ``C11 = 2k/a``, ``C12 = C44 = k/a``,
     ``k = -f'(r0)``, ``a = sqrt(2) r0``, ``B = rho0 c0^2``.
 
     Parameters

@@ -1,4 +1,4 @@
-"""(a) Linear elastic-brittle: Drucker-Prager fracture of a linked pair (physics.md 2.5).
+"""(a) Linear elastic-brittle: Drucker-Prager fracture of a linked pair (docs/theory.md 2.5).
 
 ``sigma_eq = 0.5 (beta+1) sigma_int + 1.5 (beta-1) sigma_mean >= sigma_c`` on the
 pair's stress state, the mean of the two automata's tensors, with

@@ -1,4 +1,4 @@
-"""Healing / micro-welding: unlinked -> linked under sustained compression (physics.md 2.5).
+"""Healing / micro-welding: unlinked -> linked under sustained compression (docs/theory.md 2.5).
 
 An unlinked pair relinks when its normal stress has stayed compressive beyond
 ``sigma_weld`` (a material parameter, > 0 as a magnitude) for ``n_weld``

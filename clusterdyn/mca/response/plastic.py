@@ -1,4 +1,4 @@
-"""(c) Elastic-plastic response: radial return on the automaton (Wilkins; physics.md 2.5).
+"""(c) Elastic-plastic response: radial return on the automaton (Wilkins; docs/theory.md 2.5).
 
 If the von Mises intensity of automaton i exceeds ``sigma_y(eps_p)``, the
 deviatoric parts of its pair forces are scaled,
