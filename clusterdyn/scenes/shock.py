@@ -511,7 +511,7 @@ def shock_info(s):
             "u": s.u, "rho0": s.rho0 if s.rho0 else s.material.rho0, "axis": ax,
             "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
             "two_phase": {k: x for k, x in (s.two_phase or {}).items()},
-            "fit_from": s.fit_from, "size": list(s.size)}
+            "fit_from": s.fit_from, "size": None if s.size is None else list(s.size)}
 
 
 def shock_stage(name, atoms, dyn, info, material, frames):
@@ -523,7 +523,7 @@ def shock_stage(name, atoms, dyn, info, material, frames):
     two = info["two_phase"] or None
     setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
                        float(info["length"]), material, float(info["u"]), rest_volumes(atoms), float(info["rho0"]), two,
-                       int(info["axis"]), info.get("fit_from"), tuple(info.get("size", ())))
+                       int(info["axis"]), info.get("fit_from"), tuple(info.get("size") or ()))
     tracker = shock_tracker(setup, float(info["x0"]))
     ax = setup.axis
 
