@@ -43,11 +43,16 @@ def commands(runs):
     out = []
     for name, L0, D0, V, extra in TAYLOR:
         tmax = 120 if L0 > 40 else (80 if L0 < 25 else 100)
+        if "repulsive" in extra:
+            tmax = 40                        # the rod falls apart; the run shows how, no stop is expected
         out.append(f"{PY} taylor --set L0={L0}mm --set D0={D0}mm --set V={V} --set r0={D0 / 25:.4g}mm "
                    f"--set t_max={tmax} {extra} --out {runs}/{name}".replace("  ", " "))
     for name, r0, seed in HYPER:
         out.append(f"{PY} hypervelocity --set r0={r0}mm --set seed={seed} --out {runs}/{name}")
     out.append(f"{PY} multilayer --out {runs}/ml_default")
+    out.append(f"{PY} multilayer --set r0=2mm --out {runs}/ml_r2")
+    out.append(f"python benchmarks/multilayer_lammps.py --r0 2mm --cd-result {runs}/ml_r2/result.json")
+    out.append(f"{PY} taylor --out {runs}/tay_default")
     return out
 
 
