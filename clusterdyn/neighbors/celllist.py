@@ -686,6 +686,114 @@ def _displacement(pos_nc, ref_nc, out2):
     return _disp_result(out2)
 
 
+# -- the local rebuild test: bricks -----------------------------------------------------------------
+
+#: most occupied bricks of the local rebuild test (their pairs are checked each time the global test fails)
+MAX_BRICKS = 512
+#: fixed particle chunks of the brick pass (the result does not depend on the thread count)
+BRICK_CHUNKS = 16
+
+
+@njit(cache=True)
+def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3):
+    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
+    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
+    positions; returns the number of occupied bricks, or -1 beyond ``maxb``."""
+    n = pos_nc.shape[0]
+    h = 4
+    while h < 4 * maxb:
+        h *= 2
+    hkey = np.full(h, -1, np.int64)
+    hval = np.empty(h, np.int64)
+    m = 0
+    inv = 1.0 / side
+    for i in range(n):
+        key = 0
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
+            key = key * nb_c[d] + k
+        s = int((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)) & (h - 1)   # Fibonacci hashing
+        while hkey[s] != -1 and hkey[s] != key:
+            s = (s + 1) & (h - 1)
+        if hkey[s] == -1:
+            if m == maxb:
+                return -1
+            hkey[s] = key
+            hval[s] = m
+            for d in range(3):
+                blo_b3[m, d] = np.inf
+                bhi_b3[m, d] = -np.inf
+            m += 1
+        b = hval[s]
+        brick_n[i] = b
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            blo_b3[b, d] = min(blo_b3[b, d], w)
+            bhi_b3[b, d] = max(bhi_b3[b, d], w)
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _brick_displacements(pos_nc, ref_nc, brick_n, nb, acc_tb6, out_b6):
+    """Bounding box of the displacements ``pos - ref`` of each brick: (min xyz, max xyz)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    for t in prange(nt):
+        for b in range(nb):
+            for d in range(3):
+                acc_tb6[t, b, d] = np.inf
+                acc_tb6[t, b, 3 + d] = -np.inf
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            b = brick_n[i]
+            for d in range(3):
+                x = pos_nc[i, d] - ref_nc[i, d]
+                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
+                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
+    for b in range(nb):
+        for d in range(3):
+            lo = np.inf
+            hi = -np.inf
+            for t in range(nt):
+                lo = min(lo, acc_tb6[t, b, d])
+                hi = max(hi, acc_tb6[t, b, 3 + d])
+            out_b6[b, d] = lo
+            out_b6[b, 3 + d] = hi
+
+
+@njit(cache=True)
+def _bricks_safe(disp_b6, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+    """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b (a == b
+    too), |centre_a - centre_b| + r_a + r_b (centres and half-diagonals of their displacement
+    boxes bound any |d_i - d_j|) is at most max(skin, S_ab - rc), S_ab the distance between
+    their position boxes at the build (a pair not listed was at least cutoff + skin and at
+    least S_ab apart)."""
+    nb = disp_b6.shape[0]
+    mid = np.empty((nb, 3))
+    rad = np.empty(nb)
+    for b in range(nb):
+        r2 = 0.0
+        for d in range(3):
+            mid[b, d] = 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
+            r2 += 0.25 * (disp_b6[b, 3 + d] - disp_b6[b, d]) ** 2
+        rad[b] = math.sqrt(r2)
+    for a in range(nb):
+        for b in range(a, nb):
+            s2 = 0.0
+            c2 = 0.0
+            for d in range(3):
+                g = max(0.0, blo_b3[b, d] - bhi_b3[a, d], blo_b3[a, d] - bhi_b3[b, d])
+                if periodic_c[d]:
+                    g = min(g, max(0.0, blo_b3[a, d] + box_c[d] - bhi_b3[b, d]),
+                            max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
+                s2 += g * g
+                c2 += (mid[a, d] - mid[b, d]) ** 2
+            bound = math.sqrt(c2) + rad[a] + rad[b]
+            if not bound <= max(skin, math.sqrt(s2) - rc):
+                return False
+    return True
+
+
 def _box_key(cell, pbc):
     """What :meth:`NeighborList.update` compares to tell whether the box changed since the build."""
     return (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
@@ -812,6 +920,9 @@ class NeighborList:
         self._pool = np.empty(0, np.uint32)
         self._slab_need = None
         self._ppr = (8.0, 8.0)          # pairs per row at the last build: mean, largest of a block
+        self._bricks = None             # the local rebuild test (centered lists): see _set_bricks
+        self._brick_side = 0.0
+        self.nlocal = 0                 # rebuilds the local test saved
         self._disp = np.zeros((DISP_BLOCKS, 7))
 
     def update(self, positions, cell, pbc, displacement=None):
@@ -845,7 +956,15 @@ class NeighborList:
             return not m <= lim
         else:
             m, h2 = _displacement(pos, self.ref_nc, self._disp)
-        return not (m <= lim or h2 <= lim)
+        if m <= lim or h2 <= lim:
+            return False
+        if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
+            brick_n, blo, bhi, box, periodic_c, acc, disp = self._bricks
+            _brick_displacements(pos, self.ref_nc, brick_n, blo.shape[0], acc, disp)
+            if _bricks_safe(disp, blo, bhi, box, periodic_c, self.skin, self.cutoff):
+                self.nlocal += 1
+                return False
+        return True
 
     def _grid(self, pos, cell, pbc):
         """Cells of side >= cutoff + skin over the box (periodic axes) and the bounding box (open
@@ -902,12 +1021,46 @@ class NeighborList:
             self._build_sorted(pos, *geo)
         else:
             self._build_unsorted(pos, *geo)
+        if self.centered:
+            self._set_bricks(pos, geo)
         if self.ref_nc is not None and self.ref_nc.shape == pos.shape:
             np.copyto(self.ref_nc, pos)
         else:
             self.ref_nc = pos.copy()
         self._key = _box_key(cell, pbc)
         self.nbuilds += 1
+
+    def _set_bricks(self, pos, geo):
+        """The local rebuild test's bricks: cubes of at least 8 (cutoff + skin), doubled until at
+        most :data:`MAX_BRICKS` are occupied.
+
+        The global test (:meth:`_moved`) bounds every pair's change by the spread of all
+        displacements; when it fails, the bricks bound it pair of bricks by pair of bricks,
+        using how far apart the bricks were at the build: an expanding cloud whose
+        neighbourhoods move together keeps its list.  Brick of each particle: 4 bytes.
+        """
+        lo, ext, ncell, periodic_c, box, rcut = geo
+        n = pos.shape[0]
+        self._bricks = None
+        if n < 2:
+            return
+        side = max(8.0 * rcut, 0.5 * self._brick_side)
+        boxw = np.where(periodic_c, box, 1.0)
+        brick_n = np.empty(n, np.int32)
+        blo = np.empty((MAX_BRICKS, 3))
+        bhi = np.empty((MAX_BRICKS, 3))
+        while True:
+            nb_c = np.array([max(1, int(min(math.floor(ext[d] / side), 2 ** 20)) + 1) for d in range(3)], np.int64)
+            if float(np.prod(nb_c.astype(float))) < 2.0 ** 62:
+                m = _assign_bricks(pos, boxw, periodic_c, lo, side, nb_c, MAX_BRICKS, brick_n, blo, bhi)
+                if m > 0:
+                    break
+            side *= 2.0
+        self._brick_side = side
+        if m < 2:
+            return
+        self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
+                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 6)))
 
     def _image_table(self, krange, box):
         kx, ky, kz = krange
@@ -1093,6 +1246,8 @@ class NeighborList:
         """Bytes of the arrays the list keeps between builds (list, permutation, buffers)."""
         arrs = [self.ref_nc, self.perm_n, self.xs_nc, self.offs_nc, self.first_n, self._pool,
                 self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
+        if self._bricks is not None:
+            arrs += [a for a in self._bricks if isinstance(a, np.ndarray)]
         return int(sum(a.nbytes for a in arrs if a is not None))
 
     def sorted_positions(self, positions, out=None):
