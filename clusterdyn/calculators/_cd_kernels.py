@@ -117,7 +117,7 @@ def chunk_bounds(first_n, nchunks):
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def chunk_layout(first_n, jp_p, jmask, nchunks):
     """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist, shared_n, shared_r, owner_r).
 
@@ -135,7 +135,7 @@ def chunk_layout(first_n, jp_p, jmask, nchunks):
     n = first_n.shape[0] - 1
     span = np.empty((nk, 2), np.int64)
     shared_n = np.zeros(n, np.uint8)
-    for k in range(nk):
+    for k in prange(nk):        # (chunks mark partner rows as shared: only ever the value 1)
         lo = bounds[k]
         hi = bounds[k + 1]
         b0 = bounds[k]
