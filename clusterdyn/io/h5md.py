@@ -438,8 +438,11 @@ class H5MDWriter:
             return
         n = traj["position/value"].shape[1]
         if n != self.natoms:
-            if not (n > self.natoms and self.sort_by_id and "id" in self.atoms.arrays and "id" in traj
-                    and traj["id/value"].shape[0] > 0):
+            # fewer particles than stored: a run that removes particles (its dynamics has a region
+            # of interest, or the file already has removed rows)
+            removing = getattr(self.dyn, "region", None) is not None or (
+                "id" in traj and traj["id/value"].shape[0] > 0 and bool(np.any(traj["id/value"][-1] < 0)))
+            if not (self.natoms < n and removing and self.sort_by_id and "id" in self.atoms.arrays):
                 raise InputError("atoms", f"{self.natoms} particles",
                                  f"{n} particles, as stored in {self.path}", hint="cannot append")
             self.natoms = n        # particles were removed: rows by id, fill values for the others

@@ -103,12 +103,25 @@ def test_removal_restarts_bit_for_bit_and_keeps_the_region(tmp_path):
     atoms, _ = _block(1)
     region = RegionOfInterest(hi=[atoms.positions[:, 0].max() + 2 * R0, np.inf, np.inf])
     dyn = DampedVerlet(atoms, J=50, region=region, remove_interval=3)
+    n0 = len(atoms)
+    w = H5MDWriter(tmp_path / "r.h5md", atoms, dyn=dyn)
+    dyn.attach(w, interval=30)
     dyn.run(60)
     save_run(tmp_path / "c.h5", dyn)
+    w.close()
+    dyn.observers.clear()
     dyn.run(60)
     a2, d2, _ = load_run(tmp_path / "c.h5")
     assert d2.region is not None and d2.remove_interval == 3
+    # the restarted run (fewer particles) appends to its file: same rows, fill values
+    w2 = H5MDWriter(tmp_path / "r.h5md", a2, dyn=d2, mode="a", restart_step=60)
+    d2.attach(w2, interval=30)
     d2.run(60)
+    w2.close()
+    import h5py
+    with h5py.File(tmp_path / "r.h5md", "r") as f:
+        ids = f["particles/trajectory/id/value"][()]
+    assert ids.shape == (5, n0) and (ids[-1] < 0).sum() == n0 - len(a2)
     assert dyn.removed["count"] > 0 and d2.removed["count"] == dyn.removed["count"]
     assert np.array_equal(a2.positions, atoms.positions)
     assert np.array_equal(a2.arrays["momenta"], atoms.arrays["momenta"])
