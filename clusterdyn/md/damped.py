@@ -81,17 +81,17 @@ def default_timestep(calc, u_max=0.0, factor=TIMESTEP_FACTOR):
 class RegionOfInterest:
     """An axis-aligned box; particles that leave it can be removed from a run.
 
-    Parameters
-    ----------
-    lo, hi : (3,) array-like, Angstrom
-        Corners; ``-inf`` / ``inf`` (or None for the whole vector) leave an
-        axis unbounded.  Periodic axes must be unbounded.
-
     A particle is inside when ``lo <= x <= hi`` on every axis (NaN is outside).
     Used by :class:`DampedVerlet` (``region=``): every ``remove_interval``
     steps the particles outside are taken out of the Atoms, and the kinetic
     energy, pair energy and momentum they carry away are booked in
     :meth:`DampedVerlet.energy_ledger`.
+
+    Parameters
+    ----------
+    lo, hi : (3,) array-like, Angstrom
+        Corners; ``-inf`` / ``inf`` (or None for the whole vector) leave an
+        axis unbounded.  Periodic axes must be unbounded.
     """
 
     def __init__(self, lo=None, hi=None):

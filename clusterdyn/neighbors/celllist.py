@@ -1044,7 +1044,7 @@ class NeighborList:
         self._bricks = None
         if n < 2:
             return
-        side = max(8.0 * rcut, 0.5 * self._brick_side)
+        side = 8.0 * rcut          # from the positions alone: a restart rebuilds the same bricks
         boxw = np.where(periodic_c, box, 1.0)
         brick_n = np.empty(n, np.int32)
         blo = np.empty((MAX_BRICKS, 3))
