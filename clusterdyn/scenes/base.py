@@ -338,7 +338,7 @@ def register(name, description, params):
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact", "mca"]
+SCENE_MODULES = ["shock", "plate_impact", "mca", "ejecta", "jets"]
 
 
 def all_scenes():
