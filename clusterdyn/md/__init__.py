@@ -2,6 +2,7 @@
 
 from .damped import DampedVerlet, default_timestep, pair_stability_limit, stability_limit
 from .drives import Constant, Drive, Function, Piston, Table, Traction, Wall, from_state
+from .pulses import flat_top
 
 __all__ = ["DampedVerlet", "Piston", "Wall", "Traction", "Table", "Constant", "Function", "Drive",
-           "from_state", "default_timestep", "pair_stability_limit", "stability_limit"]
+           "from_state", "default_timestep", "pair_stability_limit", "stability_limit", "flat_top"]

@@ -441,6 +441,18 @@ class ProfiledShockScene(SceneDef):
                  "damping: " + ("off" if v["J"] is None else f"J = {v['J']:g} (Gamma = c0/(J r0))")]
         return notes
 
+    @staticmethod
+    def write_summary(out, summaries, stem):
+        """The stage summaries (recorder and probe states) as a pickle, to analyse the run again
+        (``scene.analyse(params, [pickle.load(fh)])``); returns the path."""
+        import pickle
+        path = out / f"{stem}_summary.pkl"
+        tmp = path.with_suffix(".pkl.tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(summaries[0], fh)
+        tmp.replace(path)
+        return path
+
     def history_png(self, out, rec, info, title, stem):
         """Jet tip and free surface against time, ejected mass per area; PNG + CSV."""
         plt = matplotlib_agg()
@@ -704,7 +716,8 @@ class EjectaScene(ProfiledShockScene):
         title = (f"{info['profile_kind']} Rz {2 * info['amplitude'] / units.um:g} um, lambda "
                  f"{info['wavelength'] / units.um:g} um, {result.quantities['P'].value:.1f} GPa, r0 "
                  f"{info['r0'] / units.um:g} um, J = {jtxt}")
-        files = self.history_png(out, rec, info, title, "ejecta")
+        files = [self.write_summary(out, summaries, "ejecta")]
+        files += self.history_png(out, rec, info, title, "ejecta")
         files += self.snapshots_png(out, rec, info, title, "ejecta")
         files += self.spectrum_png(out, rec, info, title, v["corrections"])
         return files

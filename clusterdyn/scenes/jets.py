@@ -62,7 +62,11 @@ JETS_PARAMS = [
     Param("r0", 100.0, "cluster size (coarse: the jets' geometry is mm)", unit="um", low=0.0, low_open=True),
     Param("depth", 10.0, "mean height of the surface above the piston's base", unit="mm", low=0.0,
           low_open=True),
-] + drive_params(30.0, None, 0.0, 3.5)
+] + drive_params(30.0, None, 0.0, 3.5) + [
+    Param("jet_window", None, "start of the window over which the jet and free-surface velocities are taken "
+          "(to the end); none = halfway between the shock reaching the crests and the end", unit="us", low=0.0,
+          optional=True),
+]
 
 
 class JetsScene(ProfiledShockScene):
@@ -107,7 +111,7 @@ class JetsScene(ProfiledShockScene):
                         f"the crests at {t_crest / units.us:.3f} us")
         after = t >= t_crest
         # jets: tip and free-surface velocities over the second half of the time after breakout
-        t_late = t_crest + 0.5 * (t_end - t_crest)
+        t_late = t_crest + 0.5 * (t_end - t_crest) if v["jet_window"] is None else v["jet_window"]
         v_jet, _, nj = fit_rate(t, xtip, t_late, t_end)
         late = t >= t_late
         u_fs = float(np.nanmean(ufs[late])) if late.any() else math.nan
@@ -119,6 +123,15 @@ class JetsScene(ProfiledShockScene):
         q["jet_ratio"] = Quantity(ratio, "", JET_RATIO_EXPERIMENT, note="v_jet / u_fs against the experiment's "
                                   "3.7/3.2 (Ogorodnikov et al., aluminium alloy, about 30 GPa)")
         q["v_tip_end"] = Quantity(float(vtip[-1]) / units.km_s, "km/s", note="tip clusters' mean velocity at the end")
+        q["v_tip_max"] = Quantity(float(np.nanmax(vtip)) / units.km_s, "km/s",
+                                  note="largest tip-cluster velocity over the run")
+        q["tip_ratio_max"] = Quantity(float(np.nanmax(vtip)) / u_fs if u_fs > 0 else math.nan, "",
+                                      JET_RATIO_EXPERIMENT, note="largest tip velocity / u_fs")
+        jet_from = "valleys" if (np.isfinite(eta[-1]) and eta[-1] < 0) else "crests"
+        notes.append(f"the leading material at the end comes from the {jet_from} (eta "
+                     f"{'<' if jet_from == 'valleys' else '>'} 0): "
+                     + ("the perturbation has inverted, as in a fluid" if jet_from == "valleys" else
+                        "the perturbation has not inverted: the crests run ahead"))
         # Richtmyer: eta after the crests are shocked, over one inversion time 1/(k u_fs)
         u_fs_e = float(np.nanmedian(ufs[after])) if after.any() else math.nan
         tau = 1.0 / (k * u_fs_e) if u_fs_e > 0 else math.nan
@@ -161,7 +174,8 @@ class JetsScene(ProfiledShockScene):
         jtxt = "off" if v["J"] is None else f"{v['J']:g}"
         title = (f"{v['material']} sinusoid {info['amplitude'] / units.um:g} um / {info['wavelength'] / units.um:g} um, "
                  f"{result.quantities['P'].value:.1f} GPa, r0 {info['r0'] / units.um:g} um, J = {jtxt}")
-        files = self.history_png(out, rec, info, title, "jets")
+        files = [self.write_summary(out, summaries, "jets")]
+        files += self.history_png(out, rec, info, title, "jets")
         files += self.snapshots_png(out, rec, info, title, "jets")
         files += self.eta_png(out, rec, info, result, title)
         return files

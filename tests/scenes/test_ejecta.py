@@ -156,7 +156,7 @@ def test_ejecta_tiny_run_restart_and_report(tmp_path):
     for name in ("ejecta_history.png", "ejecta_history.csv", "ejecta_snapshots.png", "result.json"):
         assert (tmp_path / "a" / name).is_file()
     # continuing from the last checkpoint gives the same result
-    res2 = sc.run({}, out=tmp_path / "b", progress=False, restart=tmp_path / "a" / "checkpoint.h5")
+    res2 = sc.run({}, progress=False, restart=tmp_path / "a" / "checkpoint.h5")
     for k in ("P", "v_tip_max", "u_fs_max", "ejected_mass_max", "dust_count"):
         a, b = q[k].value, res2.quantities[k].value
         assert (a == b) or (math.isnan(a) and math.isnan(b)), k
@@ -164,14 +164,15 @@ def test_ejecta_tiny_run_restart_and_report(tmp_path):
         sc.run({**TINY, "slab_cells": 1}, progress=False)
 
 
-def test_jets_tiny_run_inverts_a_sinusoid(tmp_path):
-    """A steep sinusoid in aluminium at 30 GPa: the surface inverts and a jet outruns the free surface."""
+def test_jets_tiny_run():
+    """A steep sinusoid in aluminium at 30 GPa (tiny): the pressure delivered, the amplitude just after the
+    shock has passed the crests against eta0 (1 - u_fs/D), a tip outrunning the free surface, the regime."""
     sc = get_scene("jets")
-    res = sc.run({"r0": "10um", "amplitude": "0.06mm", "wavelength": "0.4mm", "depth": "0.4mm",
-                  "t_end": "0.1us", "frames": 16, "probes": 5, "h5md": False}, out=tmp_path, progress=False)
+    res = sc.run({"r0": "20um", "amplitude": "0.08mm", "wavelength": "0.64mm", "depth": "0.5mm",
+                  "t_end": "0.12us", "frames": 12, "probes": 8, "h5md": False}, progress=False)
     q = res.quantities
     assert q["P"].value == pytest.approx(30.0, rel=0.1)         # the piston sized for 30 GPa
-    assert q["eta_end"].value < 0                     # inverted: spikes from the valleys
+    assert q["eta0_plus"].value == pytest.approx(q["eta0_plus"].reference, rel=0.15)
     assert q["jet_ratio"].value > 1.0
-    d = json.loads((tmp_path / "result.json").read_text())
-    assert d["extra"]["inverted"] is True
+    assert q["ordered_fraction"].value > 0.9                     # 30 GPa: the Al lattice stays ordered
+    assert res.extra["regime"].startswith("ordered")
