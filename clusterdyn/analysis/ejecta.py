@@ -39,9 +39,10 @@ The sample is periodic across (the lateral axes ``u = (axis + 1) % 3`` and
   sheets).  More than one layer means the sample has split across its whole
   width: a spall.  Each layer's deepest *initial* height (Lagrangian) gives
   the spall plane.
-* **Dust**: fragments of at most ``g_small`` clusters: their number and mass
-  per unit area (on a smooth surface this is the numerical dusting the pair
-  damping removes, CD paper section 3).
+* **Dust**: fragments of at most ``g_small`` clusters ahead of the valley
+  front: their number and mass per unit area (on a smooth surface this is
+  the numerical dusting the pair damping removes, CD paper section 3; dust
+  off the sample's rear face is not counted).
 
 :class:`EjectaRecorder` collects these frame by frame during a run (with
 snapshots and the fragment spectrum at stated times) and is checkpointable
@@ -206,7 +207,8 @@ def ejecta_frame(atoms, *, axis, r0, b=None, exclude=None, u_drive=None, wavelen
         m_ej = math.nan
     eta = mode_amplitude(h, W, wavelength, off, bw) if wavelength else math.nan
     eta_pv = 0.5 * float(np.nanmax(h) - np.nanmin(h)) if np.isfinite(h).any() else math.nan
-    small = frag.g <= g_small
+    # dust ahead of the free surface (a sample's rear face, free after a pressure pulse, dusts too: not counted)
+    small = (frag.g <= g_small) & (frag.com[:, ax] > x_b) if np.isfinite(x_b) else frag.g <= g_small
     return {"x_bubble": x_b, "x_tip": x_tip, "v_tip": v_tip, "u_fs": u_fs,
             "ejected_mass": m_ej, "ejected_mass_area": m_ej / area if np.isfinite(m_ej) else math.nan,
             "eta": eta, "eta_pv": eta_pv, "n_layers": int(layers.sum()), "n_dust": int(small.sum()),

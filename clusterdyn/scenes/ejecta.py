@@ -91,7 +91,7 @@ from ..md.pulses import flat_top, pulse_end
 from .base import Param, Quantity, register_scene
 from .common import matplotlib_agg, piston_layer, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
-from .pressure import cd_hugoniot, piston_speed
+from .pressure import cd_hugoniot, piston_speed, pressure_at
 from .shock import shock_timestep
 
 CD_MATERIALS = tuple(cd_material_names())
@@ -213,7 +213,7 @@ class ProfiledShockScene(SceneDef):
         except InputError:
             hug = None
         Du = hugoniot_interpolant(hug["u"], hug["D"]) if hug is not None and len(hug["u"]) >= 2 else None
-        Pu = hugoniot_interpolant(hug["u"], hug["P"]) if hug is not None and len(hug["u"]) >= 2 else None
+        Pu = (lambda x: pressure_at(x, hug)) if hug is not None and len(hug["u"]) >= 2 else None
         if v["drive_csv"] is not None:
             hist = Table.read_csv(v["drive_csv"])
             stress = hist.values.ndim == 1 and _csv_is_stress(v["drive_csv"])
@@ -487,7 +487,8 @@ class ProfiledShockScene(SceneDef):
         axs[1].set_ylabel("position above the initial mean surface (um)")
         axs[1].legend(fontsize=8)
         axs[2].plot(tu, cols["ejected_mass_area"] / MG_CM2, label="ejected (ahead of the valley, v > margin u_fs)")
-        axs[2].plot(tu, cols["dust_mass"] / info["area"] / MG_CM2, label="dust (fragments of <= 10 clusters)")
+        axs[2].plot(tu, cols["dust_mass"] / info["area"] / MG_CM2, label="dust (fragments of <= 10 clusters; "
+                    "ahead of the valley front)")
         axs[2].set_xlabel("t (us)")
         axs[2].set_ylabel("mass per unit area (mg/cm2)")
         axs[2].legend(fontsize=8)
@@ -510,7 +511,8 @@ class ProfiledShockScene(SceneDef):
         sc = None
         size = max(0.3, min(6.0, 4000.0 / len(snaps[0]["x"])))
         for a, s in zip(axs[0], snaps):
-            sc = a.scatter(np.asarray(s["u"]) / units.um, (np.asarray(s["x"]) - info["mean_surface0"]) / units.um,
+            uw = np.mod(np.asarray(s["u"], float), info["width"])       # lateral positions wrapped into the period
+            sc = a.scatter(uw / units.um, (np.asarray(s["x"]) - info["mean_surface0"]) / units.um,
                            c=np.asarray(s["v"]) / units.km_s, s=size, cmap="viridis", vmin=0.0, vmax=vm,
                            linewidths=0)
             a.set_title(f"{s['t'] / units.us:.2f} us", fontsize=9)
@@ -525,10 +527,10 @@ class ProfiledShockScene(SceneDef):
         csvp = out / f"{stem}_snapshots.csv"
         with open(csvp, "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(["t_us", "u_um", "height_um", "v_km_s"])
+            w.writerow(["t_us", "u_wrapped_um", "height_um", "v_km_s"])
             for s in snaps:
                 tt = f"{s['t'] / units.us:.5g}"
-                for uu, xx, vv in zip(s["u"], s["x"], s["v"]):
+                for uu, xx, vv in zip(np.mod(np.asarray(s["u"], float), info["width"]), s["x"], s["v"]):
                     w.writerow([tt, f"{uu / units.um:.5g}", f"{(xx - info['mean_surface0']) / units.um:.5g}",
                                 f"{vv / units.km_s:.5g}"])
         return [png, csvp]
@@ -629,8 +631,6 @@ class EjectaScene(ProfiledShockScene):
         _, mej = rec.series("ejected_mass_area")
         _, xtip = rec.series("x_tip")
         _, xb = rec.series("x_bubble")
-        _, ndust = rec.series("n_dust")
-        _, dmass = rec.series("dust_mass")
         area = info["area"]
         ts = rec.spectrum["t"] if rec.spectrum else t[-1]
         ks = int(np.argmin(np.abs(t - ts)))
@@ -647,13 +647,16 @@ class EjectaScene(ProfiledShockScene):
                                          note="largest over the run")
         q["jet_length"] = Quantity(float(xtip[-1] - xb[-1]) / units.um, "um",
                                    note="jet tip ahead of the valley front at the end")
-        q["dust_count"] = Quantity(float(ndust[ks]) / (area / units.mm ** 2), "1/mm2",
-                                   note=f"fragments of <= {G_MAX} clusters per unit area at {ts / units.us:.2f} us")
-        q["dust_mass"] = Quantity(float(dmass[ks]) / area / MG_CM2, "mg/cm2",
-                                  note=f"mass in fragments of <= {G_MAX} clusters per unit area")
         spec = rec.spectrum or {}
         g = np.asarray(spec.get("g", []), dtype=np.int64)
         d = np.asarray(spec.get("diameter", []), dtype=float)
+        dust = g <= G_MAX
+        q["dust_count"] = Quantity(float(dust.sum()) / (area / units.mm ** 2), "1/mm2",
+                                   note=f"fragments of <= {G_MAX} clusters ahead of the valley front per unit area "
+                                        f"at {ts / units.us:.2f} us (on a smooth surface: the numerical dusting)")
+        q["dust_mass"] = Quantity(float(np.asarray(spec.get("mass", []), float)[dust].sum()) / area / MG_CM2
+                                  if len(g) else 0.0, "mg/cm2",
+                                  note=f"their mass per unit area")
         q["n_ejecta_fragments"] = Quantity(float(len(g)), "", note="fragments ahead of the valley front at the "
                                            "spectrum time (not full-width layers)")
         q["mean_diameter"] = Quantity(float(d.mean()) / units.um if len(d) else math.nan, "um",

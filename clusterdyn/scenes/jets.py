@@ -49,6 +49,8 @@ from .common import matplotlib_agg
 from .ejecta import CD_MATERIALS, ProfiledShockScene, drive_params
 from .lifecycle import scene_params
 
+#: Richtmyer's impulse is taken as over once the free surface moves at this fraction of its final speed
+IMPULSE_OVER = 0.9
 #: the experiment of fig. 25: jets / free surface
 JET_RATIO_EXPERIMENT = 3.7 / 3.2
 
@@ -127,41 +129,55 @@ class JetsScene(ProfiledShockScene):
                                   note="largest tip-cluster velocity over the run")
         q["tip_ratio_max"] = Quantity(float(np.nanmax(vtip)) / u_fs if u_fs > 0 else math.nan, "",
                                       JET_RATIO_EXPERIMENT, note="largest tip velocity / u_fs")
-        jet_from = "valleys" if (np.isfinite(eta[-1]) and eta[-1] < 0) else "crests"
-        notes.append(f"the leading material at the end comes from the {jet_from} (eta "
-                     f"{'<' if jet_from == 'valleys' else '>'} 0): "
-                     + ("the perturbation has inverted, as in a fluid" if jet_from == "valleys" else
-                        "the perturbation has not inverted: the crests run ahead"))
-        # Richtmyer: eta after the crests are shocked, over one inversion time 1/(k u_fs)
-        u_fs_e = float(np.nanmedian(ufs[after])) if after.any() else math.nan
-        tau = 1.0 / (k * u_fs_e) if u_fs_e > 0 else math.nan
-        t_fit = min(t_crest + tau, t_end) if np.isfinite(tau) else t_end
-        w = (t >= t_crest) & (t <= t_fit)
+
+        # Richtmyer: the impulse is over once the surface moves at (nearly) its final speed; from then on
+        # the amplitude changes at a constant rate for one inversion time 1/(k u_fs)
+        third = t >= t_crest + 2.0 * (t_end - t_crest) / 3.0
+        u_last = float(np.nanmedian(ufs[third])) if third.any() else math.nan
+        moving = after & (ufs >= IMPULSE_OVER * u_last)
+        t_start = float(t[moving][0]) if moving.any() else t_crest
+        tau = 1.0 / (k * u_last) if u_last > 0 else math.nan
+        t_fit = min(t_start + tau, t_end) if np.isfinite(tau) else t_end
+        w = (t >= t_start) & (t <= t_fit)
         u_w = float(np.nanmean(ufs[w])) if w.any() else math.nan
-        slope, eta_c, ne = fit_rate(t, eta, t_crest, t_fit)
+        slope, eta_c, ne = fit_rate(t, eta, t_start, t_fit)
         eta0p = A * (1.0 - u_w / D)
         rich = k * eta0p * u_w
         q["eta0_plus"] = Quantity(eta_c / units.um, "um", eta0p / units.um,
-                                  note="eta at the crests' shock time (fit intercept) vs eta0 (1 - u_fs/D)")
+                                  note=f"eta when the surface has reached {IMPULSE_OVER:g} of its final speed "
+                                       "(fit intercept) vs eta0 (1 - u_fs/D)")
         q["growth_rate"] = Quantity(-slope / units.m_s, "m/s", rich / units.m_s,
-                                    note=f"-d eta/dt over {t_crest / units.us:.3f}-{t_fit / units.us:.3f} us "
-                                         f"({ne} frames) vs Richtmyer k eta0+ u_fs (u_fs = {u_w / units.km_s:.3f} "
-                                         f"km/s, D = {D / units.km_s:.3f} km/s)")
+                                    note=f"-d eta/dt over {t_start / units.us:.4f}-{t_fit / units.us:.4f} us "
+                                         f"({ne} frames) vs Richtmyer k eta0+ u_fs with eta0+ = eta0 (1 - u_fs/D) "
+                                         f"(u_fs = {u_w / units.km_s:.3f} km/s, D = {D / units.km_s:.3f} km/s)")
         q["growth_rate_measured_eta0"] = Quantity(-slope / units.m_s, "m/s", k * eta_c * u_w / units.m_s,
                                                   note="the same against k eta0+ u_fs with the measured eta0+")
-        inverted = bool(np.any(eta[after] < 0)) if after.any() else False
-        t_inv = float(t[after][np.argmax(eta[after] < 0)]) if inverted else math.nan
+        # the zero crossing of eta (a 5-frame running mean) after the impulse: the mean rate to inversion
+        eta_s = np.array([np.nanmean(eta[max(0, i - 2):i + 3]) for i in range(len(eta))])
+        neg = (t >= t_start) & (eta_s < 0)
+        inverted = bool(neg.any())
+        t_inv = float(t[neg][0]) if inverted else math.nan
+        q["inversion_rate"] = Quantity((eta_c / (t_inv - t_start)) / units.m_s if inverted and t_inv > t_start
+                                       else math.nan, "m/s", k * eta_c * u_w / units.m_s,
+                                       note="eta0+ / (time from the impulse to the zero crossing of eta, 5-frame "
+                                            "mean) vs k eta0+ u_fs (measured eta0+): Richtmyer's eta reaches zero "
+                                            "after one inversion time 1/(k u_fs)")
+        jet_from = "valleys" if (np.isfinite(eta_s[-1]) and eta_s[-1] < 0) else "crests"
+        notes.append(f"the leading material at the end comes from the {jet_from} (eta, 5-frame mean, "
+                     f"{'<' if jet_from == 'valleys' else '>'} 0): "
+                     + ("the perturbation has inverted, as in a fluid" if jet_from == "valleys" else
+                        "the perturbation has not inverted: the crests run ahead"))
         q["eta_end"] = Quantity(float(eta[-1]) / units.um, "um", note="signed mode amplitude at the end "
                                 "(negative: inverted, spikes from the valleys)")
         notes.append(f"perturbation {'inverts' if inverted else 'does not invert'}"
-                     + (f" at {t_inv / units.us:.3f} us ({(t_inv - t_crest) * k * u_w:.2f} inversion times "
-                        f"1/(k u_fs) after the crests' shock)" if inverted else f" by {t_end / units.us:.2f} us"))
+                     + (f" at {t_inv / units.us:.4f} us ({(t_inv - t_start) * k * u_w:.2f} inversion times "
+                        f"1/(k u_fs) after the impulse)" if inverted else f" by {t_end / units.us:.2f} us"))
         notes.append("jet tip: foremost cluster of fragments with >= "
                      f"{v['g_tip']} clusters; u_fs: mean velocity of the body's {v['fs_layer']:g} r0 layer "
                      "below the valley front")
         extra = {"regime": self.regime(pr["ordered"]), "k_eta0": k * A, "t_valley_us": t_valley / units.us,
                  "t_crest_us": t_crest / units.us, "inverted": inverted, "t_inversion_us": t_inv / units.us,
-                 "richtmyer_window_us": [t_crest / units.us, t_fit / units.us], "n_particles": sm["n"],
+                 "richtmyer_window_us": [t_start / units.us, t_fit / units.us], "n_particles": sm["n"],
                  "n_steps": sm["nsteps"], "particle_steps": sm["n"] * sm["nsteps"], "stepping_time_s": sm["t_run"],
                  "u_drive_km_s": info["u"] / units.km_s, "r0_um": info["r0"] / units.um,
                  "orientation": info["orientation"]}
@@ -184,7 +200,7 @@ class JetsScene(ProfiledShockScene):
         plt = matplotlib_agg()
         t, eta = rec.series("eta")
         ex = result.extra
-        t0 = ex["t_crest_us"] * units.us
+        t0 = ex["richtmyer_window_us"][0] * units.us
         q = result.quantities
         fig, ax = plt.subplots(figsize=(6.5, 4.2))
         ax.plot(t / units.us, eta / units.um, label="eta (cosine mode of the surface)")
@@ -193,7 +209,8 @@ class JetsScene(ProfiledShockScene):
             ax.plot(tt / units.us, q["eta0_plus"].value - q["growth_rate"].reference * units.m_s * (tt - t0) / units.um,
                     "k--", lw=0.9, label="Richtmyer: eta0+ - k eta0+ u_fs t")
         ax.axhline(0, color="grey", lw=0.5)
-        ax.axvline(t0 / units.us, color="grey", ls=":", lw=0.8, label="shock at the crests")
+        ax.axvline(ex["t_crest_us"], color="grey", ls=":", lw=0.8, label="shock at the crests")
+        ax.axvline(t0 / units.us, color="grey", ls="--", lw=0.8, label="surface at 0.9 of its final speed")
         ax.set_xlabel("t (us)")
         ax.set_ylabel("eta (um)")
         ax.legend(fontsize=8)

@@ -21,8 +21,9 @@ and a combination without rows is measured on the fly (about 2 s per point
 on 2 cores) on :data:`DEFAULT_U_GRID`.
 
 :func:`piston_speed` inverts P(u), a monotone cubic through the points, for
-the target pressure; the scenes then measure the pressure their own sample
-reaches and report it beside the target.
+the target pressure (points where P falls as u rises, unsteady weak shocks
+such as lead's at 0.5 km/s, are left out); the scenes then measure the
+pressure their own sample reaches and report it beside the target.
 """
 
 import argparse
@@ -36,7 +37,7 @@ from .. import units
 from ..errors import InputError
 from ..materials import get_material
 
-__all__ = ["measure_cd_hugoniot", "write_cd_hugoniot", "cd_hugoniot", "piston_speed", "CD_HUGONIOT_CSV",
+__all__ = ["measure_cd_hugoniot", "write_cd_hugoniot", "cd_hugoniot", "piston_speed", "pressure_at", "CD_HUGONIOT_CSV",
            "DEFAULT_U_GRID", "HUGONIOT_CELLS"]
 
 #: the shipped table of measured CD Hugoniot points
@@ -145,6 +146,23 @@ def cd_hugoniot(material, *, J=None, direction="100", rc=1.15, measure=True, pro
             "source": source, "material": name, "J": _jkey(J), "direction": str(direction), "rc": float(rc)}
 
 
+def _rising(h):
+    """The points of a CD Hugoniot on which P rises with u (a point below its predecessor is left out)."""
+    u, Ps = h["u"], h["P"]
+    keep = [0]
+    for k in range(1, len(u)):
+        if Ps[k] > Ps[keep[-1]]:
+            keep.append(k)
+    return u[keep], Ps[keep]
+
+
+def pressure_at(u, hugoniot):
+    """P(u) of measured CD Hugoniot points (the monotone cubic :func:`piston_speed` inverts), ASE units."""
+    from scipy.interpolate import PchipInterpolator
+    us, Ps = _rising(hugoniot)
+    return float(PchipInterpolator(us, Ps, extrapolate=True)(u))
+
+
 def piston_speed(material, pressure, *, J=None, direction="100", rc=1.15, hugoniot=None):
     """Piston speed whose shock has longitudinal stress ``pressure`` in the CD model.
 
@@ -179,13 +197,7 @@ def piston_speed(material, pressure, *, J=None, direction="100", rc=1.15, hugoni
     if not (math.isfinite(P) and P > 0):
         raise InputError("pressure", pressure, "a positive pressure")
     h = hugoniot if hugoniot is not None else cd_hugoniot(material, J=J, direction=direction, rc=rc)
-    u, Ps = h["u"], h["P"]
-    # P(u) must rise; keep the points up to the first one that does not
-    keep = [0]
-    for k in range(1, len(u)):
-        if Ps[k] > Ps[keep[-1]]:
-            keep.append(k)
-    u, Ps = u[keep], Ps[keep]
+    u, Ps = _rising(h)
     if len(u) < 2 or not (Ps[0] <= P <= Ps[-1]):
         raise InputError("pressure", f"{P / units.GPa:g} GPa",
                          f"a pressure within the measured CD Hugoniot of {h['material']} (J={h['J']}): "
