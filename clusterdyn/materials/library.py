@@ -239,6 +239,13 @@ class Hugoniot:
             d = d_new
         return d_new * units.km_s
 
+    @property
+    def u_max(self):
+        """Top of the measured particle-velocity range (ASE units; inf when the table gives none).
+        Above it :meth:`D` extrapolates the fit."""
+        hi = self.valid_u_km_s.split("-")[-1].strip() if self.valid_u_km_s else ""
+        return float(hi) * units.km_s if hi else np.inf
+
     def pressure(self, u):
         """Longitudinal stress behind the front, rho0 D u (ASE units)."""
         return self.rho0_g_cm3 * units.g_cm3 * self.D(u) * np.asarray(u)

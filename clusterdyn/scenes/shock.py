@@ -475,10 +475,12 @@ def shock_quantities(state, mat, u, reference=True):
             pass
     refD = ref.D(u) / units.km_s if ref else None
     rho0_ref = ref.rho0_g_cm3 if ref else None
+    note = (f"front position fit, rms residual {state.fit_rms / state.width:.3f} slabs"
+            if np.isfinite(state.width) else "front position fit")
+    if ref is not None and u > ref.u_max * (1 + 1e-9):
+        note += (f"; reference extrapolated: {ref.name} is measured to u = {ref.u_max / units.km_s:g} km/s")
     q = {
-        "D": Quantity(state.D_fit / units.km_s, "km/s", refD, spread=state.D_fit_err / units.km_s,
-                      note=f"front position fit, rms residual {state.fit_rms / state.width:.3f} slabs"
-                      if np.isfinite(state.width) else "front position fit"),
+        "D": Quantity(state.D_fit / units.km_s, "km/s", refD, spread=state.D_fit_err / units.km_s, note=note),
         "u": Quantity(state.u / units.km_s, "km/s", u / units.km_s, spread=state.u_spread / units.km_s,
                       note="mean particle velocity behind the front vs piston"),
         "P": Quantity(state.P / units.GPa, "GPa",
@@ -631,7 +633,9 @@ class ShockScene(SceneDef):
                      f"slabs; D over the two halves of the fit {state.D_halves[0] / units.km_s:.4g}, "
                      f"{state.D_halves[1] / units.km_s:.4g} km/s")
         if ref is not None:
-            notes.append(f"reference: {ref.name} Hugoniot, {ref.source}")
+            notes.append(f"reference: {ref.name} Hugoniot, {ref.source}"
+                         + (f" (measured to u = {ref.u_max / units.km_s:g} km/s: extrapolated here)"
+                            if sm["u"] > ref.u_max * (1 + 1e-9) else ""))
         if two is not None:
             notes.append(f"two-phase: {two['matrix']} matrix with {two['n_spheres']} {two['inclusion']} spheres, "
                          f"inclusion mass fraction {two['mass_fraction']:.4f} (target {two['mass_fraction_target']:g}), "

@@ -103,7 +103,7 @@ PARAMS = [
 
 MAIN_COLUMNS = [
     ("u_piston", "u_p km/s", ".3g"), ("D", "D km/s", ".4f"), ("D_err", "+-", ".3f"),
-    ("D_ref", "D_exp", ".4f"), ("err_ref", "err", "+.2%"), ("D_cold", "D_cold", ".4f"), ("D_mass", "D_mass", ".4f"),
+    ("D_ref", "D_exp", ".4f"), ("exp_range", "exp", ""), ("err_ref", "err", "+.2%"), ("D_cold", "D_cold", ".4f"), ("D_mass", "D_mass", ".4f"),
     ("mass_check", "mass", "+.2%"), ("u", "u km/s", ".4f"), ("u_dev", "u/u_p-1", "+.2%"),
     ("P", "P GPa", ".2f"), ("P_momentum", "rho0Du", ".2f"), ("momentum_check", "P/rho0Du-1", "+.2%"),
     ("rho", "rho g/cm3", ".4f"), ("sigma_u", "sig_u GPa", ".3g"), ("fit_rms_slabs", "rms slab", ".3f"),
@@ -249,6 +249,11 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
         if not (res is not None and "two_phase" in res.extra):
             d_c, _ = cold_shock_state(ov["material"], float(ov["u"]) * units.km_s)
             row["D_cold"] = float(ov["u"]) / (1.0 - 1.0 / d_c)
+            try:
+                row["exp_range"] = ("extrap." if float(ov["u"]) * units.km_s > hugoniot(ov["material"]).u_max
+                                    * (1 + 1e-9) else "meas.")
+            except InputError:
+                pass
         if res is not None and "two_phase" in res.extra:
             row["inclusion_mass_fraction"] = res.extra["two_phase"]["mass_fraction"]
             row["inclusion_volume_fraction"] = res.extra["two_phase"]["volume_fraction"]
@@ -543,7 +548,11 @@ def _plots(folder, rows, mat, sv, two, phases, summary, uni):
     fig, ax = plt.subplots(figsize=(7, 5.2))
     uu = np.linspace(0.0, umax, 200)
     if ref is not None:
-        ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", lw=1.5, label=f"experiment ({ref.name})")
+        meas = uu <= ref.u_max / units.km_s
+        ax.plot(uu[meas], ref.D(uu[meas] * units.km_s) / units.km_s, "k-", lw=1.5, label=f"experiment ({ref.name})")
+        if not meas.all():
+            ax.plot(uu[~meas], ref.D(uu[~meas] * units.km_s) / units.km_s, "k--", lw=1.0,
+                    label=f"{ref.name} extrapolated beyond u = {ref.u_max / units.km_s:g} km/s")
     names = [mat] if not two else list(phases.values())
     for k, m in enumerate(names):
         dd = np.linspace(1.0005, 3.0, 400)
@@ -598,8 +607,12 @@ def _plots(folder, rows, mat, sv, two, phases, summary, uni):
                 color="k" if not two else f"C{5 + k}", label=f"cold curve P_x {m}")
     if ref is not None:
         ur = np.linspace(0.0, umax, 200) * units.km_s
-        ax.plot(ref.density(ur) / units.g_cm3, ref.pressure(ur) / units.GPa, "k-", lw=1.5,
+        meas = ur <= ref.u_max
+        ax.plot(ref.density(ur[meas]) / units.g_cm3, ref.pressure(ur[meas]) / units.GPa, "k-", lw=1.5,
                 label=f"experiment ({ref.name})")
+        if not meas.all():
+            ax.plot(ref.density(ur[~meas]) / units.g_cm3, ref.pressure(ur[~meas]) / units.GPa, "k--", lw=1.0,
+                    label=f"{ref.name} extrapolated beyond u = {ref.u_max / units.km_s:g} km/s")
     if uni is not None:
         dl, sa, si, _ = uni["arrays"]
         r0_ = get_material(mat).rho0 / units.g_cm3

@@ -59,6 +59,7 @@ def test_top_of_the_u_range_runs_and_above_is_refused():
     res = scene.run({"u": f"{U_MAX:g}km/s", "size": "16x3x3", "h5md": "false"}, progress=False)
     assert res.extra["dt_retries_used"] == 0 and res.quantities["D"].value > U_MAX
     assert res.steady is False          # 16 cells: far too short to be steady, and it says so
+    assert "reference extrapolated: Al-1100 is measured to u = 6 km/s" in res.quantities["D"].note
     size, fit_from = shock_size(U_MAX * units.km_s)
     assert size == (140, 6, 6) and fit_from > 0          # what the defaults run at the top
     with pytest.raises(InputError, match="u="):
