@@ -1,45 +1,60 @@
 """Where a step of the aluminium piston shock spends its time, on 1 and 2 threads.
 
     python benchmarks/profile_step.py --nx 128 --J none --rounds 8
+    python benchmarks/profile_step.py --nx 128 --fraction 0.3 --threads 1 --clock process
 
 One process, one scene (``build_shock``, cross-section 16 x 16 cells, N =
-1024 x nx/4): after ``--warmup`` steps, rounds of ``--steps`` steps on one
-thread and then on two alternate; timers around the force loop, the list
+1024 nx): after ``--warmup`` steps, or from the saved state at ``--fraction``
+of the sample shocked (``benchmarks/_states.py``), rounds of ``--steps`` steps
+on each thread count alternate; timers around the force loop, the list
 builds, the fused kick-drift-gather pass and the force sum give each part's
 time per particle and step (median over rounds), and each part's two-thread
 efficiency (median of the rounds' own).  "other" is the rest of the step:
 Python, constraints and checks.  The timers add a few microseconds a call.
+``--clock process`` times with the process' CPU time instead of the wall
+clock (one thread only: on a loaded machine it leaves out the time the
+process waited for a core).  The script profiles whatever ``clusterdyn`` is
+imported, so ``PYTHONPATH=/path/to/other/tree`` profiles another version.
 """
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--nx", type=int, default=128, help="sample length in cells (N = 1024 nx / 4)")
+    ap.add_argument("--nx", type=int, default=128, help="sample length in cells (N = 1024 nx)")
     ap.add_argument("--J", default="none", help="damping J, or none")
     ap.add_argument("--rounds", type=int, default=8)
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--warmup", type=int, default=40)
+    ap.add_argument("--fraction", type=float, default=None,
+                    help="start from the saved state with this fraction shocked (instead of --warmup steps)")
+    ap.add_argument("--threads", default="1,2")
+    ap.add_argument("--clock", choices=("wall", "process"), default="wall")
     a = ap.parse_args(argv)
 
+    import clusterdyn
     from clusterdyn import units
     from clusterdyn.parallel import set_max_threads
-    from clusterdyn.scenes.shock import build_shock
     import clusterdyn.calculators._cd_kernels as K
     import clusterdyn.calculators.cluster as C
     import clusterdyn.neighbors.celllist as CL
 
+    clock = time.perf_counter if a.clock == "wall" else time.process_time
     acc = {}
 
     def timed(name, f):
         def g(*args, **kw):
-            t0 = time.perf_counter()
+            t0 = clock()
             r = f(*args, **kw)
-            acc[name] = acc.get(name, 0.0) + time.perf_counter() - t0
+            acc[name] = acc.get(name, 0.0) + clock() - t0
             return r
         return g
 
@@ -51,27 +66,48 @@ def main(argv=None):
     K.reduce_rows = timed(parts[3], K.reduce_rows)
     K.reduce_shared = timed(parts[3], K.reduce_shared)
 
-    s = build_shock(size=(a.nx, 16, 16), u=3 * units.km_s, J=None if a.J == "none" else float(a.J))
-    s.dyn.run(a.warmup)
-    n = len(s.atoms)
-    per = {1: {}, 2: {}}
+    J = None if a.J == "none" else float(a.J)
+    if a.fraction is None:
+        from clusterdyn.scenes.shock import build_shock
+        s = build_shock(size=(a.nx, 16, 16), u=3 * units.km_s, J=J)
+        dyn, atoms = s.dyn, s.atoms
+        dyn.run(a.warmup)
+        where = f"after {a.warmup} steps"
+    else:
+        from _states import load_state, shock_state
+        atoms, dyn, extra = load_state(shock_state(a.nx, a.fraction), J=J)
+        dyn.run(2)
+        where = f"from step {dyn.nsteps - 2}, {extra['shocked_fraction']:.0%} shocked"
+    n = len(atoms)
+    threads = [int(t) for t in a.threads.split(",")]
+    per = {t: {} for t in threads}
+    builds = {t: 0 for t in threads}
     for _ in range(a.rounds):
-        for th in (1, 2):
+        for th in threads:
             set_max_threads(th)
             acc.clear()
-            t0 = time.perf_counter()
-            s.dyn.run(a.steps)
-            acc["whole step"] = time.perf_counter() - t0
+            nb0 = atoms.calc.nl.nbuilds
+            t0 = clock()
+            dyn.run(a.steps)
+            acc["whole step"] = clock() - t0
+            builds[th] += atoms.calc.nl.nbuilds - nb0
             acc["other"] = acc["whole step"] - sum(acc.get(p, 0.0) for p in parts)
             for k in parts + ("other", "whole step"):
                 per[th].setdefault(k, []).append(acc.get(k, 0.0) / (a.steps * n) * 1e9)
-    print(f"N = {n}, J = {a.J}: {a.rounds} rounds of {a.steps} steps on 1 then 2 threads; "
-          "ns per particle and step, medians over rounds")
-    print(f"| part | 1 thread | 2 threads | efficiency |\n|---|---|---|---|")
+    import os
+    print(f"clusterdyn {Path(clusterdyn.__file__).parent.parent}: N = {n}, J = {a.J}, {where}: {a.rounds} rounds "
+          f"of {a.steps} steps on {', '.join(map(str, threads))} thread(s), {a.clock} clock; ns per particle and "
+          f"step, medians over rounds; list builds per 100 steps: "
+          + ", ".join(f"{100 * builds[t] / (a.rounds * a.steps):.1f}" for t in threads)
+          + f"; load average {os.getloadavg()[0]:.1f}")
+    head = "| part | " + " | ".join(f"{t} thread(s)" for t in threads) + (" | efficiency |" if len(threads) == 2 else " |")
+    print(head + "\n|" + "---|" * (len(threads) + 1 + (len(threads) == 2)))
     for k in parts + ("other", "whole step"):
-        t1, t2 = np.array(per[1][k]), np.array(per[2][k])
-        eff = f"{np.median(t1 / t2) / 2:.0%}" if k != "other" and t2.min() > 0 else ""
-        print(f"| {k} | {np.median(t1):.1f} | {np.median(t2):.1f} | {eff} |")
+        row = [f"{np.median(per[t][k]):.1f}" for t in threads]
+        if len(threads) == 2:
+            t1, t2 = np.array(per[threads[0]][k]), np.array(per[threads[1]][k])
+            row.append(f"{np.median(t1 / t2) / 2:.0%}" if k != "other" and t2.min() > 0 else "")
+        print(f"| {k} | " + " | ".join(row) + " |")
 
 
 if __name__ == "__main__":

@@ -164,7 +164,7 @@ def worker_specialise(a):
     out = np.empty((n, 3))
 
     def args(vs, eta):
-        return (lay["xs"], c._NO_TYPES, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, c.coef, c.meta,
+        return (lay["xs"], c._NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, c.gtab, c.coef, c.meta,
                 lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], lay["stat_k"], lay["vir_k6"], vs, eta,
                 lay["e_m1"], lay["w_m6"], nl.perm_n, c._NO_BONDS, c._NO_IDS, False, lay["shared_n"], out,
                 c._NO_V, 0.0)
@@ -173,7 +173,7 @@ def worker_specialise(a):
     cases = {
         "cd_forces_1 (damping compiled out)": lambda: K.cd_forces_1(*args(c._NO_V, c._NO_ETA)),
         "reference loop (no damping code)": lambda: reference_forces(
-            lay["xs"], nl.first_n, nl.j_p, nl.img_p, nl.image_sc, c.coef, c.meta, lay["bounds"], lay["span"],
+            lay["xs"], nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, c.gtab, c.meta, lay["bounds"], lay["span"],
             lay["boff"], lay["f_m3"], lay["stat_k"], lay["shared_n"], nl.perm_n, out),
         "cd_forces_damped_1, eta = 0": lambda: K.cd_forces_damped_1(*args(lay["vs"], eta0)),
         "cd_forces_damped_1, J = 50": lambda: K.cd_forces_damped_1(*args(lay["vs"], eta50)),

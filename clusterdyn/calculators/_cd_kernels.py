@@ -64,6 +64,29 @@ CHUNK_ROWS = 16384
 SHARED_BLOCK = 4096
 
 
+def kernel_tables(coef, meta):
+    """The tables the kernels read: ``(coef, gtab)``, both (nt, nt, nb + 1, 4) float64.
+
+    ``coef`` is the energy cubic of :func:`clusterdyn.potentials.build_tables`;
+    ``gtab[..., k, :]`` = (-2 c1/h_s, -4 c2/h_s, -6 c3/h_s, 1): the pair force
+    over the separation, ``-2 dE/ds = g0 + t (g1 + t g2)``, with the constants
+    folded in (two multiplications fewer per pair), and 1 marking a bin within
+    the cut-off (the damping's weight).  Bin ``nb`` is zero in both: a pair
+    beyond its cut-off (in the list's skin) lands there and adds nothing, so
+    the step kernels need no branch per pair.
+    """
+    nt, _, nb, _ = coef.shape
+    c = np.zeros((nt, nt, nb + 1, 4))
+    c[:, :, :nb] = coef
+    g = np.zeros((nt, nt, nb + 1, 4))
+    invh = meta[:, :, 1][:, :, None]
+    g[:, :, :nb, 0] = -2.0 * invh * coef[..., 1]
+    g[:, :, :nb, 1] = -4.0 * invh * coef[..., 2]
+    g[:, :, :nb, 2] = -6.0 * invh * coef[..., 3]
+    g[:, :, :nb, 3] = 1.0
+    return c, g
+
+
 @njit(inline="always")
 def _bonded(bonds_nk, i, jid):
     for k in range(bonds_nk.shape[1]):
@@ -94,8 +117,8 @@ def chunk_bounds(first_n, nchunks):
     return b
 
 
-@njit(cache=True)
-def chunk_layout(first_n, j_p, nchunks):
+@njit(cache=True, parallel=True)
+def chunk_layout(first_n, jp_p, jmask, nchunks):
     """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist, shared_n, shared_r, owner_r).
 
     Chunk k owns rows ``bounds_k[k]:bounds_k[k+1]`` and writes rows
@@ -112,13 +135,13 @@ def chunk_layout(first_n, j_p, nchunks):
     n = first_n.shape[0] - 1
     span = np.empty((nk, 2), np.int64)
     shared_n = np.zeros(n, np.uint8)
-    for k in range(nk):
+    for k in prange(nk):        # (chunks mark partner rows as shared: only ever the value 1)
         lo = bounds[k]
         hi = bounds[k + 1]
         b0 = bounds[k]
         b1 = bounds[k + 1]
         for p in range(first_n[b0], first_n[b1]):
-            j = j_p[p]
+            j = np.int64(jp_p[p] & jmask)
             if j < lo:
                 lo = j
             if j + 1 > hi:
@@ -234,20 +257,25 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
 
 
 @njit(inline="always")
-def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+def _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, tab, bounds_k, span_k2, boff_k,
            f_mc, stat_k, vir_k6, vs_nc, eta_tt, pp, perm_n, init, fin,
            MULTI, DAMP, VIR, PP, INIT, ENERGY, TRACK, FIN):
     """The pair loop of chunk k (see the module docstring for the flags).
 
-    ``pp = (e_m1, w_m6)``, ``init = (bonds_nk, id_n)``, ``fin = (shared_n, out_nc, p_nc, h)``:
-    grouped so that a call stays under CPython's 30 positional arguments (beyond
-    them it passes a tuple, which numba can not inline).
+    ``tab = (gtab, coef, meta)``, ``pp = (e_m1, w_m6)``, ``init = (bonds_nk, id_n)``,
+    ``fin = (shared_n, out_nc, p_nc, h)``: grouped so that a call stays under
+    CPython's 30 positional arguments (beyond them it passes a tuple, which numba
+    can not inline).
     """
+    gtab, coef, meta = tab
     e_m1, w_m6 = pp
     bonds_nk, id_n = init
     shared_n, out_nc, p_nc, h = fin
     off = boff_k[k] - span_k2[k, 0]
-    zero_img = image_sc.shape[0] // 2
+    offu = np.uint64(off)
+    zero_img = np.uint32(image_sc.shape[0] // 2)
+    sh = np.uint32(shift)
+    jmask = np.uint32((1 << shift) - 1)
     for r in range(boff_k[k], boff_k[k + 1]):
         f_mc[r, 0] = 0.0
         f_mc[r, 1] = 0.0
@@ -256,7 +284,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             e_m1[r, 0] = 0.0
             for c in range(6):
                 w_m6[r, c] = 0.0
-    nb = coef.shape[2]
+    nb = coef.shape[2] - 1        # the last bin is zero: pairs beyond the cut-off land there
     a = 0
     b = 0
     smin = meta[0, 0, 0]
@@ -294,63 +322,67 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
         fxi = 0.0
         fyi = 0.0
         fzi = 0.0
-        for p in range(first_n[i], first_n[i + 1]):
-            j = j_p[p]
-            ju = np.uint64(j)  # unsigned: no negative-index wraparound code per access
+        for p in range(np.uint64(first_n[i]), np.uint64(first_n[i + 1])):
+            v = jp_p[p]
+            ju = np.uint64(v & jmask)  # unsigned: no negative-index wraparound code per access
             dx = xs_nc[ju, 0] - xi
             dy = xs_nc[ju, 1] - yi
             dz = xs_nc[ju, 2] - zi
-            s = img_p[p]
+            s = v >> sh
             if s != zero_img:
-                dx += image_sc[s, 0]
-                dy += image_sc[s, 1]
-                dz += image_sc[s, 2]
+                su = np.uint64(s)
+                dx += image_sc[su, 0]
+                dy += image_sc[su, 1]
+                dz += image_sc[su, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if MULTI:
                 b = type_s[ju]
                 cut2 = meta[a, b, 2]
-            if not r2 < cut2:
-                continue
+                rmin2 = meta[a, b, 3]
+                smin = meta[a, b, 0]
+                invh = meta[a, b, 1]
             r2n = r2
             if MULTI:
                 r2n = r2 * meta[a, b, 4]
             if TRACK:
+                # the energy, virial and per-particle passes: pairs beyond the cut-off skipped,
+                # the closest pair and the pairs below the table counted
+                if not r2 < cut2:
+                    continue
                 if r2n < minr2:
                     minr2 = r2n
                     ci = i
-                    cj = j
+                    cj = np.int64(ju)
+                if r2 < rmin2:
+                    nclose += 1
+                    continue
             else:
+                # the steps: no branch per pair; a pair beyond its cut-off evaluates the zero
+                # bin; the smallest distance over all listed pairs (beyond the cut-off only
+                # when no pair is within it, which the calculator reports as inf)
                 minr2 = min(minr2, r2n)
-            if MULTI:
-                rmin2 = meta[a, b, 3]
-            if r2 < rmin2:
-                nclose += 1
-                continue
+                if MULTI:
+                    nclose += 1 if r2 < rmin2 else 0
             free = False
             if INIT:
-                free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[j]])
+                free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[ju]])
                 if free and r2 >= meta[a, b, 6]:
                     continue
-            if MULTI:
-                smin = meta[a, b, 0]
-                invh = meta[a, b, 1]
             x = (r2 - smin) * invh
-            kb = int(x)
-            if kb >= nb:
-                kb = nb - 1
+            kb = min(max(int(x), 0), nb)
             t = x - kb
-            c1 = coef[a, b, kb, 1]
-            c2 = coef[a, b, kb, 2]
-            c3 = coef[a, b, kb, 3]
-            de = c1 + t * (2.0 * c2 + 3.0 * t * c3)
+            kbu = np.uint64(kb)
+            s_ = gtab[a, b, kbu, 0] + t * (gtab[a, b, kbu, 1] + t * gtab[a, b, kbu, 2])
             e = 0.0
             if ENERGY:  # (every per-particle variant has it)
-                e = coef[a, b, kb, 0] + t * (c1 + t * (c2 + t * c3))
+                c1 = coef[a, b, kbu, 1]
+                c2 = coef[a, b, kbu, 2]
+                c3 = coef[a, b, kbu, 3]
+                e = coef[a, b, kbu, 0] + t * (c1 + t * (c2 + t * c3))
                 if INIT:
                     if free:
                         e += meta[a, b, 5]
                 energy += e
-            s_ = -2.0 * de * invh
             fx = s_ * dx
             fy = s_ * dy
             fz = s_ * dz
@@ -369,7 +401,7 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 vxy += hxy
                 if PP:
                     ri = off + i
-                    rj = np.uint64(off + j)
+                    rj = offu + ju
                     e_m1[ri, 0] += 0.5 * e
                     e_m1[rj, 0] += 0.5 * e
                     w_m6[ri, 0] += 0.5 * hxx
@@ -387,17 +419,18 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
             if DAMP:
                 if MULTI:
                     eta = eta_tt[a, b]
+                ein = eta * gtab[a, b, kbu, 3]          # 1 within the cut-off, 0 beyond
                 dvx = vxi - vs_nc[ju, 0]
                 dvy = vyi - vs_nc[ju, 1]
                 dvz = vzi - vs_nc[ju, 2]
-                fx += eta * dvx
-                fy += eta * dvy
-                fz += eta * dvz
-                dissip += eta * (dvx * dvx + dvy * dvy + dvz * dvz)
+                fx += ein * dvx
+                fy += ein * dvy
+                fz += ein * dvz
+                dissip += ein * (dvx * dvx + dvy * dvy + dvz * dvz)
             fxi -= fx
             fyi -= fy
             fzi -= fz
-            rj = np.uint64(off + j)
+            rj = offu + ju
             f_mc[rj, 0] += fx
             f_mc[rj, 1] += fy
             f_mc[rj, 2] += fz
@@ -412,6 +445,8 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
                 _put3(out_nc, p_nc, np.uint64(perm_n[i]), f_mc[r, 0], f_mc[r, 1], f_mc[r, 2], kick, h)
     if not MULTI:
         minr2 *= meta[0, 0, 4]
+    if not TRACK and not MULTI:
+        nclose = -1               # not counted: the calculator recounts when minr2 is below the table
     stat_k[k, 0] = energy
     stat_k[k, 1] = minr2
     stat_k[k, 2] = ci
@@ -429,89 +464,89 @@ def _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k
 # -- the variants (arguments: see _chunk; ``initial_only`` is read by the multi kernels only) ----
 
 @njit(cache=True, parallel=True)
-def cd_forces_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+def cd_forces_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
                 f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
                 shared_n, out_nc, p_nc, h):
     """One material: forces only (the dynamics' undamped step)."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), False, False, False, False, False, False, False, True)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_virial_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+def cd_forces_virial_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
                        boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
                        initial_only, shared_n, out_nc, p_nc, h):
     """One material: forces, energy and cell virial."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), False, False, True, False, False, True, True, False)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_damped_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+def cd_forces_damped_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
                        boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
                        initial_only, shared_n, out_nc, p_nc, h):
     """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order), no energy."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), False, True, False, False, False, False, False, True)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_per_particle_1(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+def cd_forces_per_particle_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
                              boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk,
                              id_n, initial_only, shared_n, out_nc, p_nc, h):
     """One material: forces, energy, virial and per-particle energies and virials."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), False, False, True, True, False, True, True, False)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+def cd_forces_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
                     f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
                     shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): forces, energy and cell virial."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), True, False, True, False, initial_only, True, True, False)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_only_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+def cd_forces_only_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
                          f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
                          shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): forces only (the dynamics' undamped step)."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), True, False, False, False, initial_only, False, True, True)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_damped_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2,
+def cd_forces_damped_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
                            boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
                            initial_only, shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): conservative + pair damping forces, no energy."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), True, True, False, False, initial_only, False, True, True)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_per_particle_multi(xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k,
+def cd_forces_per_particle_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k,
                                  span_k2, boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n,
                                  bonds_nk, id_n, initial_only, shared_n, out_nc, p_nc, h):
     """Several materials (or attraction='initial'): with per-particle energies and virials."""
     for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, j_p, img_p, image_sc, coef, meta, bounds_k, span_k2, boff_k,
+        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
                f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
                (shared_n, out_nc, p_nc, h), True, False, True, True, initial_only, True, True, False)
 

@@ -205,7 +205,8 @@ class ClusterDynamics(Calculator):
             return
         rc = check_rc(self.parameters.rc)
         self.potentials = [ClusterPotential(m, r, rc) for m, r in zip(mats, r0)]
-        self.coef, self.meta, self.tables = build_tables(self.potentials, int(self.parameters.n_table))
+        coef, self.meta, self.tables = build_tables(self.potentials, int(self.parameters.n_table))
+        self.coef, self.gtab = K.kernel_tables(coef, self.meta)
         r0min = min(r0)
         skin = default_skin(rc) if self.parameters.skin is None else float(self.parameters.skin)
         if not skin >= 0:
@@ -213,6 +214,10 @@ class ClusterDynamics(Calculator):
         cutoff = max(t.cutoff for row in self.tables for t in row)
         self.nl = NeighborList(cutoff, skin * r0min, half=True, sort=True, centered=True)
         self.masses_t = np.array([p.mass for p in self.potentials])
+        m = self.meta
+        #: squared cut-off and smallest tabulated distance in units of r0_ab^2 (largest over pair types)
+        self._cut2n = float((m[:, :, 2] * m[:, :, 4]).max())
+        self._rmin2n = float((m[:, :, 3] * m[:, :, 4]).max())
         self._setup_key = key
         self._buffers = None
         self._ncompute = 0
@@ -238,13 +243,14 @@ class ClusterDynamics(Calculator):
         nl = self.nl
         lay = self._buffers
         if lay is None or lay["n"] != n:
-            lay = {"n": n, "key": None, "xs": np.empty((n, 3)), "vs": None, "f_m3": np.empty((0, 3)),
+            lay = {"n": n, "key": None, "vs": None, "f_m3": np.empty((0, 3)),
                    "e_m1": self._NO_PP1, "w_m6": self._NO_PP6}
             self._buffers = lay
         if lay["key"] != nl.nbuilds:
             nk = max(1, n // K.CHUNK_ROWS)
+            lay["xs"] = nl.xs_nc          # the list's buffer of sorted positions (rewritten by each build)
             (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], lay["shared_n"],
-             lay["shared_r"], lay["owner_r"]) = K.chunk_layout(nl.first_n, nl.j_p, nk)
+             lay["shared_r"], lay["owner_r"]) = K.chunk_layout(nl.first_n, nl.jp_p, nl.j_mask, nk)
             lay["stat_k"] = np.empty((nk, 6))
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["boff"][-1])
@@ -324,9 +330,9 @@ class ClusterDynamics(Calculator):
         # themselves, with the half kick; reduce_shared sums the rest
         fin = mode in ("forces", "damped")
         p_kick, h = (self._NO_V, 0.0) if kick is None else (kick[0], float(kick[1]))
-        args = (xs, types_s, nl.first_n, nl.j_p, nl.img_p, nl.image_sc, self.coef, self.meta, lay["bounds"],
-                lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"], perm,
-                bonds, ids, initial, lay["shared_n"], forces, p_kick, h)
+        args = (xs, types_s, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, self.gtab, self.coef, self.meta,
+                lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"],
+                perm, bonds, ids, initial, lay["shared_n"], forces, p_kick, h)
         K.KERNELS[multi, mode](*args)
         for c in (2, 3):
             for k in range(stat.shape[0]):
@@ -334,13 +340,16 @@ class ClusterDynamics(Calculator):
                     stat[k, c] = perm[int(stat[k, c])]
         self._ncompute += 1
         k = int(np.argmin(stat[:, 1]))
-        stats = _Stats(self, min_r_over_r0=math.sqrt(stat[k, 1]) if stat[k, 1] < 1e299 else math.inf,
+        # the step kernels take the smallest distance over every listed pair: beyond the cut-off
+        # it means that no pair is within it
+        x2 = stat[k, 1]
+        stats = _Stats(self, min_r_over_r0=math.sqrt(x2) if x2 < self._cut2n else math.inf,
                        npairs=nl.npairs, nbuilds=nl.nbuilds)
         if stat[k, 2] >= 0:
             stats["closest"] = (int(stat[k, 2]), int(stat[k, 3]))
         else:
             # the tracking variant on the same arguments, without damping (vs, eta)
-            stats._args = (K.KERNELS[multi, "virial"], args[:14] + (self._NO_V, self._NO_ETA) + args[16:],
+            stats._args = (K.KERNELS[multi, "virial"], args[:15] + (self._NO_V, self._NO_ETA) + args[17:],
                            stat, perm)
         self.last_stats = stats
         self._check_close(stat, types, step)
@@ -428,6 +437,12 @@ class ClusterDynamics(Calculator):
         return True, np.ascontiguousarray(bonds, np.int64), np.ascontiguousarray(ids, np.int64)
 
     def _check_close(self, stat, types, step):
+        if stat[:, 4].min() < 0:
+            # a single-material step kernel does not count the pairs below the table: recount
+            # (the tracking variant) only when the smallest distance is below it
+            if stat[:, 1].min() > self._rmin2n:
+                return
+            self.last_stats["closest"]            # reruns the loop's tracking variant into stat
         nclose = stat[:, 4].sum()
         if nclose > 0:
             k = int(np.argmin(stat[:, 1]))

@@ -65,6 +65,18 @@ row is written in increasing id order, so row ``i`` is the same particle in
 every frame even if the Atoms are re-sorted during the run (read back, the
 Atoms come in id order).
 
+Removed particles
+-----------------
+A run may take particles out of the Atoms (``DampedVerlet(region=...)``).
+The datasets keep the size of the first frame: the rows of the particles
+present are found by id, and the rows of removed particles hold fill values
+(also the datasets' HDF5 fill value): NaN for floating-point series
+(positions, velocities, forces, masses of the frame), -1 for signed integers
+(``id``, ``species``, ``material``, ...), 0 for unsigned ones, False for
+booleans.  MDAnalysis reads such a file as it is (NaN coordinates for the
+removed rows); :class:`H5MDReader` and :func:`read_h5md` drop the rows whose
+``id`` is -1.
+
 Crash safety
 ------------
 The file uses HDF5's default (oldest compatible) format, no SWMR, and is
@@ -191,6 +203,17 @@ def _chunks(shape, itemsize):
     per_row = itemsize * int(np.prod(shape[1:], dtype=np.int64)) if len(shape) > 1 else itemsize
     rows = max(1, min(shape[0], _MAX_CHUNK_BYTES // max(per_row, 1)))
     return (1, rows) + tuple(shape[1:])
+
+
+def _fill_value(dtype):
+    """The value of a removed particle's rows: NaN (float, complex), -1 (signed int), 0
+    (unsigned), False (bool); also the datasets' HDF5 fill value."""
+    dtype = np.dtype(dtype)
+    if dtype.kind in "fc":
+        return dtype.type(np.nan)
+    if dtype.kind == "i":
+        return dtype.type(-1)
+    return dtype.type(0)
 
 
 def _storage_dtype(a):
@@ -351,6 +374,7 @@ class H5MDWriter:
         self._pair_state_arg = pair_state
         self._mass_fixed = True  # masses stored once (time-independent); files before: per frame
         self._mass_ref = None
+        self._ids0 = None          # sorted ids of the first frame: the rows of every frame
         self._layout = None      # set on the first frame (mode 'w') or from the file ('a')
         self._warned = set()
 
@@ -414,8 +438,16 @@ class H5MDWriter:
             return
         n = traj["position/value"].shape[1]
         if n != self.natoms:
-            raise InputError("atoms", f"{self.natoms} particles",
-                             f"{n} particles, as stored in {self.path}", hint="cannot append")
+            # fewer particles than stored: a run that removes particles (its dynamics has a region
+            # of interest, or the file already has removed rows)
+            removing = getattr(self.dyn, "region", None) is not None or (
+                "id" in traj and traj["id/value"].shape[0] > 0 and bool(np.any(traj["id/value"][-1] < 0)))
+            if not (self.natoms < n and removing and self.sort_by_id and "id" in self.atoms.arrays):
+                raise InputError("atoms", f"{self.natoms} particles",
+                                 f"{n} particles, as stored in {self.path}", hint="cannot append")
+            self.natoms = n        # particles were removed: rows by id, fill values for the others
+        if "id" in traj and traj["id/value"].shape[0] > 0:
+            self._ids0 = np.sort(np.asarray(traj["id/value"][0], dtype=np.int64))
         boundary = [b.decode() if isinstance(b, bytes) else str(b)
                     for b in traj["box"].attrs["boundary"]]
         pbc = np.array([b == "periodic" for b in boundary])
@@ -581,7 +613,7 @@ class H5MDWriter:
         ds = g.create_dataset("value", shape=(0,) + sample.shape,
                               maxshape=(None,) + sample.shape, dtype=dtype,
                               chunks=_chunks(sample.shape, dtype.itemsize) if sample.ndim
-                              else (1024,), **kw)
+                              else (1024,), fillvalue=_fill_value(dtype), **kw)
         if unit is not None:
             ds.attrs["unit"] = unit
         if "step" not in g:
@@ -716,9 +748,20 @@ class H5MDWriter:
     def _collect(self, atoms):
         """All values of one frame, rows in output order, in file units."""
         n = len(atoms)
+        dest = None                # rows of the present particles when some were removed
+        if n == self.natoms and self._ids0 is None and self.sort_by_id and "id" in atoms.arrays:
+            self._ids0 = np.sort(np.asarray(atoms.arrays["id"], dtype=np.int64))
         if n != self.natoms:
-            raise InputError("atoms", f"{n} particles",
-                             f"{self.natoms} particles (H5MD frames need a fixed count)")
+            if n > self.natoms or self._ids0 is None or "id" not in atoms.arrays:
+                raise InputError("atoms", f"{n} particles",
+                                 f"{self.natoms} particles (H5MD frames need a fixed count; fewer only when "
+                                 "particles with an 'id' array were removed and sort_by_id=True)")
+            ids = np.asarray(atoms.arrays["id"], dtype=np.int64)
+            dest = np.searchsorted(self._ids0, np.sort(ids))
+            if np.any(dest >= self.natoms) or not np.array_equal(self._ids0[np.minimum(dest, self.natoms - 1)],
+                                                                 np.sort(ids)):
+                raise InputError("atoms.arrays['id']", "ids not in the first frame",
+                                 "the ids of particles present in the first frame (removed ones are filled)")
         if not np.array_equal(np.asarray(atoms.pbc, dtype=bool), self._pbc):
             raise InputError("atoms.pbc", atoms.pbc.tolist(),
                              f"{self._pbc.tolist()} as when the writer was created")
@@ -727,7 +770,12 @@ class H5MDWriter:
 
         def rows(a):
             a = np.asarray(a)
-            return a if order is None else a[order]
+            a = a if order is None else a[order]
+            if dest is None:
+                return a
+            full = np.full((self.natoms,) + a.shape[1:], _fill_value(a.dtype), dtype=a.dtype)
+            full[dest] = a
+            return full
 
         pos = np.asarray(atoms.positions, dtype=np.float64)
         if layout["image"]:
@@ -848,8 +896,9 @@ class H5MDWriter:
             self.write_metadata()
             self._layout = layout
         frame = self._collect(atoms)
+        present = ~np.isnan(frame["mass"])
         if self._mass_fixed and self._mass_ref is not None \
-                and not np.array_equal(frame["mass"], self._mass_ref):
+                and not np.array_equal(frame["mass"][present], self._mass_ref[present]):
             raise InputError("atoms masses", "changed since the first frame",
                              "fixed masses (stored once, as a time-independent H5MD element)",
                              hint="each row must be the same particle in every frame: give the "
@@ -1318,6 +1367,11 @@ class H5MDReader:
             if "force" in self._elements:
                 results["forces"] = g["force"]["value"][i].astype(np.float64) \
                     * _unit_factor("force", g["force"]["value"], self.path)
+            if "id" in atoms.arrays and np.any(atoms.arrays["id"] < 0):
+                keep = atoms.arrays["id"] >= 0       # rows of particles removed from the run
+                atoms = atoms[keep]
+                if "forces" in results:
+                    results["forces"] = results["forces"][keep]
             if "potential_energy" in self.observables:
                 ov = self._file["observables"]["potential_energy"]
                 if isinstance(ov, _h5group()) and "value" in ov and ov["value"].shape[0] > i:

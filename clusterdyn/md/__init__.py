@@ -1,9 +1,9 @@
 """Dynamics (ASE MolecularDynamics subclasses) and the drive and wall family."""
 
-from .damped import DampedVerlet, default_timestep, pair_stability_limit, stability_limit
+from .damped import DampedVerlet, RegionOfInterest, default_timestep, pair_stability_limit, stability_limit
 from .drives import Constant, Drive, Function, Piston, SmoothRamp, Table, Traction, Wall, from_state
 from .pulses import flat_top
 
-__all__ = ["DampedVerlet", "Piston", "Wall", "Traction", "Table", "Constant", "SmoothRamp", "Function", "Drive",
+__all__ = ["DampedVerlet", "RegionOfInterest", "Piston", "Wall", "Traction", "Table", "Constant", "SmoothRamp", "Function", "Drive",
            "from_state", "default_timestep", "pair_stability_limit", "stability_limit",
            "flat_top"]

@@ -78,6 +78,56 @@ def default_timestep(calc, u_max=0.0, factor=TIMESTEP_FACTOR):
     return factor * min(p.r0 / (p.c0 + abs(u_max)) for p in calc.potentials)
 
 
+class RegionOfInterest:
+    """An axis-aligned box; particles that leave it can be removed from a run.
+
+    A particle is inside when ``lo <= x <= hi`` on every axis (NaN is outside).
+    Used by :class:`DampedVerlet` (``region=``): every ``remove_interval``
+    steps the particles outside are taken out of the Atoms, and the kinetic
+    energy, pair energy and momentum they carry away are booked in
+    :meth:`DampedVerlet.energy_ledger`.
+
+    Parameters
+    ----------
+    lo, hi : (3,) array-like, Angstrom
+        Corners; ``-inf`` / ``inf`` (or None for the whole vector) leave an
+        axis unbounded.  Periodic axes must be unbounded.
+    """
+
+    def __init__(self, lo=None, hi=None):
+        self.lo = self._corner("lo", lo, -np.inf)
+        self.hi = self._corner("hi", hi, np.inf)
+        if np.any(self.hi < self.lo):
+            raise InputError("hi", self.hi.tolist(), f">= lo = {self.lo.tolist()} on every axis")
+
+    @staticmethod
+    def _corner(name, v, default):
+        if v is None:
+            return np.full(3, default)
+        try:
+            a = np.array(v, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            raise InputError(name, v, "three numbers (Angstrom; +-inf for an unbounded axis)") from None
+        if np.any(np.isnan(a)):
+            raise InputError(name, v, "three numbers (Angstrom; +-inf for an unbounded axis), no NaN")
+        return a
+
+    def inside(self, positions):
+        """(N,) bool: particles within the box."""
+        x = np.asarray(positions, dtype=float)
+        return np.all((x >= self.lo) & (x <= self.hi), axis=1)
+
+    def todict(self):
+        return {"kind": "RegionOfInterest", "lo": self.lo.tolist(), "hi": self.hi.tolist()}
+
+    @classmethod
+    def fromdict(cls, d):
+        return cls(d["lo"], d["hi"])
+
+    def __repr__(self):
+        return f"RegionOfInterest(lo={self.lo.tolist()}, hi={self.hi.tolist()})"
+
+
 class DampedVerlet(MolecularDynamics):
     """Velocity Verlet for clusters, with optional pair damping (CD eq. 5-6).
 
@@ -95,6 +145,18 @@ class DampedVerlet(MolecularDynamics):
     check_interval : int, default 1
         Steps between stiffness checks (time step against the limit at the
         current smallest pair distance).
+    region : RegionOfInterest, optional
+        Remove the particles that leave it (checked every ``remove_interval``
+        steps, at the end of a step).  The Atoms shrink (every array and the
+        constraints' indices follow; particles of pistons and tractions are
+        kept); :attr:`removed` and :meth:`energy_ledger` book the kinetic
+        energy, pair energy (the potential energy before minus after) and
+        momentum they take away; the forces are recomputed without them.
+        Output writers that map particles by ``atoms.arrays['id']`` (the
+        H5MD writer) keep fixed-size frames with fill values; an ``id`` array
+        is added (``0..N-1``) when the Atoms have none.
+    remove_interval : int, default 10
+        Steps between the region checks.
     trajectory, logfile, loginterval :
         As for ASE's MolecularDynamics.
 
@@ -108,8 +170,8 @@ class DampedVerlet(MolecularDynamics):
         when first read after a step.
     """
 
-    def __init__(self, atoms, timestep=None, J=50, *, check_interval=1, trajectory=None,
-                 logfile=None, loginterval=1, **kwargs):
+    def __init__(self, atoms, timestep=None, J=50, *, check_interval=1, region=None, remove_interval=10,
+                 trajectory=None, logfile=None, loginterval=1, **kwargs):
         calc = atoms.calc
         if J is not None:
             try:
@@ -123,6 +185,30 @@ class DampedVerlet(MolecularDynamics):
         elif J is not None:
             raise InputError("atoms.calc", type(calc).__name__,
                              "a ClusterDynamics calculator when damping is on (J given)")
+        if region is not None and not isinstance(region, RegionOfInterest):
+            raise InputError("region", region, "a RegionOfInterest (or None)")
+        if region is not None:
+            per = np.asarray(atoms.pbc, dtype=bool)
+            if np.any(np.isfinite(region.lo[per])) or np.any(np.isfinite(region.hi[per])):
+                raise InputError("region", repr(region), "no bound along the periodic axes "
+                                 f"{[ax for ax, p in zip('xyz', per) if p]}")
+            for c in atoms.constraints:
+                if not hasattr(c, "index_shuffle"):
+                    raise InputError("atoms.constraints", type(c).__name__,
+                                     "constraints that follow removed particles (index_shuffle) with region=")
+            if "id" not in atoms.arrays:
+                atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
+        try:
+            remove_interval = int(remove_interval)
+        except (TypeError, ValueError):
+            raise InputError("remove_interval", remove_interval, "a positive number of steps") from None
+        if remove_interval < 1:
+            raise InputError("remove_interval", remove_interval, "a positive number of steps")
+        self.region = region
+        self.remove_interval = remove_interval
+        #: what the removed particles took away since the start: count, mass (amu), kinetic and
+        #: pair energy (eV), momentum (3,) (amu Angstrom / ASE time)
+        self.removed = {"count": 0, "mass": 0.0, "kinetic": 0.0, "potential": 0.0, "momentum": np.zeros(3)}
         self.J = J
         self.calc = calc
         speeds = [c.max_speed() for c in atoms.constraints if isinstance(c, Drive)]
@@ -183,6 +269,8 @@ class DampedVerlet(MolecularDynamics):
     def todict(self):
         d = super().todict()
         d.update({"J": self.J, "stability_limit": self.stability_limit})
+        if self.region is not None:
+            d.update({"region": self.region.todict(), "remove_interval": self.remove_interval})
         return d
 
     def _invm(self):
@@ -350,7 +438,62 @@ class DampedVerlet(MolecularDynamics):
         for c in cons:
             c.adjust_momenta(atoms, p)
         self.timings["integrate"] += time.perf_counter() - t0
+        if self.region is not None and (self.nsteps + 1) % self.remove_interval == 0:
+            self.remove_outside()
         return self.forces
+
+    def remove_outside(self):
+        """Take the particles outside :attr:`region` out of the Atoms now; returns how many.
+
+        Their kinetic energy, momentum and pair energy (potential energy before
+        minus after: their bonds to the rest and among themselves) are added to
+        :attr:`removed`; the forces are recomputed on the particles left.
+        Particles of pistons and tractions are never removed.
+        """
+        atoms = self.atoms
+        if self.region is None:
+            return 0
+        out = ~self.region.inside(atoms.arrays["positions"])
+        for d in self._drives():
+            if isinstance(d, _Layer):
+                out[d.index] = False
+        if not out.any():
+            return 0
+        if self.forces is None:
+            self._refresh_properties()
+        gone = np.flatnonzero(out)
+        keep = np.flatnonzero(~out)
+        if keep.size == 0:
+            raise InputError("region", repr(self.region), "a region that keeps at least one particle",
+                             hint=f"all {len(atoms)} particles are outside at step {self.nsteps}")
+        p = atoms.arrays["momenta"]
+        m = atoms.get_masses()
+        k_gone = 0.5 * float(((p[gone] ** 2).sum(axis=1) / m[gone]).sum())
+        p_gone = p[gone].sum(axis=0)
+        u_before = self.potential_energy
+        cons = list(atoms.constraints)
+        atoms.set_constraint()
+        for c in cons:
+            c.index_shuffle(atoms, keep)
+        for name in list(atoms.arrays):
+            atoms.arrays[name] = np.ascontiguousarray(atoms.arrays[name][keep])
+        atoms.set_constraint(cons)
+        if atoms.calc is not None and hasattr(atoms.calc, "reset"):
+            atoms.calc.reset()
+        self.masses = atoms.get_masses()[:, None]
+        self._fbuf = None
+        self._invm_n = self._invm()
+        self._epot = None
+        self.forces = self._compute_forces()
+        self._own_forces = True
+        u_after = self.potential_energy
+        r = self.removed
+        r["count"] += int(gone.size)
+        r["mass"] += float(m[gone].sum())
+        r["kinetic"] += k_gone
+        r["potential"] += float(u_before - u_after)
+        r["momentum"] = r["momentum"] + p_gone
+        return int(gone.size)
 
     def _check_speed(self, v2max, k):
         if not math.isfinite(v2max):
@@ -403,7 +546,11 @@ class DampedVerlet(MolecularDynamics):
             self._refresh_properties()
         self._ledger0 = {"kinetic": self.get_kinetic_energy(), "potential": self.potential_energy,
                          "layers": self._layer_kinetic(), "work": self._drive_sum("work"),
-                         "dissipated": self._drive_sum("dissipated"), "damping_loss": self.damping_loss}
+                         "dissipated": self._drive_sum("dissipated"), "damping_loss": self.damping_loss,
+                         "removed_kinetic": self.removed["kinetic"], "removed_potential": self.removed["potential"],
+                         "removed_px": float(self.removed["momentum"][0]),
+                         "removed_py": float(self.removed["momentum"][1]),
+                         "removed_pz": float(self.removed["momentum"][2])}
 
     def _drive_sum(self, name):
         return float(sum(getattr(d, name, 0.0) for d in self._drives()))
@@ -414,10 +561,13 @@ class DampedVerlet(MolecularDynamics):
         ``kinetic``, ``potential`` (pairs and walls) now; ``drive_work`` (work
         of pistons and tractions on the other particles), ``layer_kinetic``
         (the change of the driven layers' own kinetic energy), ``damping_loss``
-        (pair damping), ``wall_dissipated`` (sticking walls), all since the
-        start; ``energy_in`` = initial kinetic energy + the absolute drive work;
-        ``residual`` = change of (kinetic + potential) minus (drive work +
-        layer kinetic - damping loss - wall dissipated): zero for an exact
+        (pair damping), ``wall_dissipated`` (sticking walls), ``removed_kinetic``
+        and ``removed_potential`` (the energy the particles removed outside the
+        ``region`` took away) and ``removed_momentum`` ((3,), amu Angstrom /
+        ASE time), all since the start; ``energy_in`` = initial kinetic energy
+        + the absolute drive work; ``residual`` = change of (kinetic +
+        potential) minus (drive work + layer kinetic - damping loss - wall
+        dissipated - removed kinetic - removed potential): zero for an exact
         integrator, velocity Verlet's O(dt^2) error otherwise.
         """
         if self._ledger0 is None:
@@ -428,11 +578,15 @@ class DampedVerlet(MolecularDynamics):
         layers = self._layer_kinetic() - L0["layers"]
         loss = self.damping_loss - L0["damping_loss"]
         diss = self._drive_sum("dissipated") - L0["dissipated"]
+        rk = self.removed["kinetic"] - L0.get("removed_kinetic", 0.0)
+        ru = self.removed["potential"] - L0.get("removed_potential", 0.0)
+        rp = self.removed["momentum"] - np.array([L0.get("removed_p" + a, 0.0) for a in "xyz"])
         change = K + U - L0["kinetic"] - L0["potential"]
         return {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
                 "drive_work": work, "layer_kinetic": layers, "damping_loss": loss, "wall_dissipated": diss,
+                "removed_kinetic": rk, "removed_potential": ru, "removed_momentum": rp,
                 "energy_in": L0["kinetic"] + abs(work),
-                "residual": change - (work + layers - loss - diss)}
+                "residual": change - (work + layers - loss - diss - rk - ru)}
 
     # -- checkpoint state (files: clusterdyn.io.checkpoint.save_run / load_run) ----------------
     def get_state(self):
@@ -441,6 +595,12 @@ class DampedVerlet(MolecularDynamics):
         nl = getattr(self.calc, "nl", None)
         st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J,
               "damping_loss": self.damping_loss, "dissipation": self._dissipation}
+        if self.region is not None or self.removed["count"]:
+            r = self.removed
+            st["removed"] = {"count": r["count"], "mass": r["mass"], "kinetic": r["kinetic"],
+                             "potential": r["potential"], "momentum": np.array(r["momentum"], dtype=float)}
+        if self.region is not None:
+            st["region"] = dict(self.region.todict(), remove_interval=self.remove_interval)
         if self._ledger0 is not None:
             st["ledger0"] = dict(self._ledger0)
         if nl is not None and nl.ref_nc is not None:
@@ -455,6 +615,20 @@ class DampedVerlet(MolecularDynamics):
         self.dt = float(st["dt"])
         self.damping_loss = float(st.get("damping_loss", 0.0))
         self._dissipation = float(st.get("dissipation", 0.0))
+        if "removed" in st:
+            r = st["removed"]
+            self.removed = {"count": int(r["count"]), "mass": float(r["mass"]), "kinetic": float(r["kinetic"]),
+                            "potential": float(r["potential"]),
+                            "momentum": np.array(r["momentum"], dtype=float).reshape(3)}
+        if "region" in st:
+            reg = RegionOfInterest.fromdict(st["region"])
+            iv = int(st["region"].get("remove_interval", self.remove_interval))
+            if self.region is None:
+                self.region, self.remove_interval = reg, iv
+            elif (not np.array_equal(reg.lo, self.region.lo) or not np.array_equal(reg.hi, self.region.hi)
+                  or iv != self.remove_interval):
+                raise InputError("region", repr(self.region), f"the checkpoint's {reg!r} every {iv} steps",
+                                 hint="a restart keeps the run's region of interest")
         if "ledger0" in st:
             self._ledger0 = {k: float(x) for k, x in st["ledger0"].items()}
         nl = getattr(self.calc, "nl", None)

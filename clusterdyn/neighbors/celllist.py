@@ -35,8 +35,18 @@ from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take, use_threads
 
 #: blocks of the displacement check (fixed: the result does not depend on the thread count)
 DISP_BLOCKS = 16
-#: most cells per particle before the grid is coarsened (dilute, exploding samples)
+#: most cells per particle before the grid of the unsorted and full-stencil searches is coarsened
+#: (dilute, exploding samples: their memory stays O(N))
 MAX_CELLS_PER_PARTICLE = 4
+#: a sorted half list uses a dense cell array while the bounding box has at most this many cells per
+#: particle, else only the occupied cells (sparse); both O(N) memory
+DENSE_CELLS_PER_PARTICLE = 2
+#: rows per block of the half-list build (the unit of work of a thread and of a slab)
+FILL_BLOCK_ROWS = 4096
+#: a block's slab of the pair pool: its previous need times this (plus 64)
+SLAB_MARGIN = 1.2
+#: bit of the image code in a packed half-list pair ``j | code << HALF_SHIFT`` (27 codes; N < 2**27)
+HALF_SHIFT = 27
 
 
 @njit(cache=True)
@@ -181,54 +191,177 @@ def _wrap(pos_nc, box_c, periodic_c, wpos_nc):
             wpos_nc[i, d] = x
 
 
-@njit(cache=True)
-def _sort_by_cell(wpos_nc, pos_nc, lo_c, inv_cs_c, ncell_c, axes, xs_nc, offs_nc, cell_s):
-    """Counting sort of the particles by cell (axes[0] slowest); stable in the original order.
+@njit(inline="always")
+def _wrap1(x, box, periodic):
+    """A coordinate wrapped into [0, box) along a periodic axis (as :func:`_wrap`), else itself."""
+    if periodic:
+        x -= math.floor(x / box) * box
+        if x >= box:
+            x -= box
+    return x
 
-    Returns (perm, start): sorted row k holds particle perm[k]; cell c holds rows start[c]..start[c+1].
-    Fills the sorted wrapped positions ``xs_nc``, wrap offsets ``offs_nc`` and cells ``cell_s``.
-    """
-    n = wpos_nc.shape[0]
-    a0, a1, a2 = axes[0], axes[1], axes[2]
-    n0, n1, n2 = ncell_c[a0], ncell_c[a1], ncell_c[a2]
-    ncell = n0 * n1 * n2
+
+@njit(inline="always")
+def _slot(w, lo, inv_cs, m):
+    k = int(math.floor((w - lo) * inv_cs))
+    return min(max(k, 0), m - 1)
+
+
+@njit(inline="always")
+def _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes):
+    """Cell key (slot 0 slowest) of particle i: (k0 * n1 + k1) * n2 + k2."""
+    a0 = axes[0]
+    a1 = axes[1]
+    a2 = axes[2]
+    k0 = _slot(_wrap1(pos_nc[i, a0], box_c[a0], periodic_c[a0]), lo_c[a0], inv_cs_c[a0], ncell_c[a0])
+    k1 = _slot(_wrap1(pos_nc[i, a1], box_c[a1], periodic_c[a1]), lo_c[a1], inv_cs_c[a1], ncell_c[a1])
+    k2 = _slot(_wrap1(pos_nc[i, a2], box_c[a2], periodic_c[a2]), lo_c[a2], inv_cs_c[a2], ncell_c[a2])
+    return (k0 * ncell_c[a1] + k1) * ncell_c[a2] + k2
+
+
+@njit(inline="always")
+def _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc):
+    perm[k] = i
+    for d in range(3):
+        w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+        xs_nc[k, d] = w
+        offs_nc[k, d] = w - pos_nc[i, d]
+
+
+@njit(cache=True)
+def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
+    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
+    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
+    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
+    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
+    dense row starts ``start`` (ncell + 1)."""
+    n = pos_nc.shape[0]
+    ncell = ncell_c[0] * ncell_c[1] * ncell_c[2]
     cell_n = np.empty(n, np.int64)
-    count = np.zeros(ncell + 1, np.int64)
+    start = np.zeros(ncell + 1, np.int64)
     for i in range(n):
-        k0 = int(math.floor((wpos_nc[i, a0] - lo_c[a0]) * inv_cs_c[a0]))
-        k1 = int(math.floor((wpos_nc[i, a1] - lo_c[a1]) * inv_cs_c[a1]))
-        k2 = int(math.floor((wpos_nc[i, a2] - lo_c[a2]) * inv_cs_c[a2]))
-        k0 = min(max(k0, 0), n0 - 1)
-        k1 = min(max(k1, 0), n1 - 1)
-        k2 = min(max(k2, 0), n2 - 1)
-        c = (k0 * n1 + k1) * n2 + k2
+        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
         cell_n[i] = c
-        count[c + 1] += 1
+        start[c + 1] += 1
+    m = 0
     for c in range(ncell):
-        count[c + 1] += count[c]
-    start = count.copy()
-    fill = count[:-1].copy()
-    perm = np.empty(n, np.int64)
+        if start[c + 1] > 0:
+            m += 1
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
     for i in range(n):
         c = cell_n[i]
         k = fill[c]
         fill[c] += 1
-        perm[k] = i
-        cell_s[k] = c
-        for d in range(3):
-            xs_nc[k, d] = wpos_nc[i, d]
-            offs_nc[k, d] = wpos_nc[i, d] - pos_nc[i, d]
-    return perm, start
+        _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc)
+    ukey = np.empty(m, np.int64)
+    ustart = np.empty(m + 1, np.int64)
+    q = 0
+    for c in range(ncell):
+        if start[c + 1] > start[c]:
+            ukey[q] = c
+            ustart[q] = start[c]
+            q += 1
+    ustart[m] = n
+    return ukey, ustart, start
+
+
+#: bits per digit of the radix sort of sparse cell keys
+RADIX_BITS = 11
+
+
+@njit(cache=True)
+def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
+    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
+    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
+    n = pos_nc.shape[0]
+    key = np.empty(n, np.int64)
+    idx = np.empty(n, np.int64)
+    kmax = 0
+    for i in range(n):
+        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
+        key[i] = c
+        idx[i] = i
+        kmax = max(kmax, c)
+    nbits = 0
+    while nbits < 63 and (kmax >> nbits) > 0:
+        nbits += 1
+    key2 = np.empty(n, np.int64)
+    idx2 = np.empty(n, np.int64)
+    nd = 1 << RADIX_BITS
+    mask = nd - 1
+    count = np.empty(nd + 1, np.int64)
+    sh = 0
+    while sh < nbits:                       # LSD: stable, so equal keys keep the original order
+        count[:] = 0
+        for i in range(n):
+            count[((key[i] >> sh) & mask) + 1] += 1
+        for d in range(nd):
+            count[d + 1] += count[d]
+        for i in range(n):
+            d = (key[i] >> sh) & mask
+            q = count[d]
+            count[d] += 1
+            key2[q] = key[i]
+            idx2[q] = idx[i]
+        key, key2 = key2, key
+        idx, idx2 = idx2, idx
+        sh += RADIX_BITS
+    m = 0
+    for k in range(n):
+        if k == 0 or key[k] != key[k - 1]:
+            m += 1
+    ukey = np.empty(m, np.int64)
+    ustart = np.empty(m + 1, np.int64)
+    q = 0
+    for k in range(n):
+        if k == 0 or key[k] != key[k - 1]:
+            ukey[q] = key[k]
+            ustart[q] = k
+            q += 1
+        _put_sorted(pos_nc, idx[k], k, box_c, periodic_c, perm, xs_nc, offs_nc)
+    ustart[m] = n
+    return ukey, ustart
 
 
 @njit(inline="always")
-def _scan(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, code, rcut2, cap, nbr_nk, img_nk, cnt_n):
-    """Partners of rows a0..a1 among rows b0..b1 (shifted by -s); ``own``: only j > i."""
+def _lower(ukey, target, cur, r):
+    """First q with ukey[q] >= target; ``cur[r]`` is the run's cursor (its last answer): the
+    targets of a run mostly increase from cell to cell, so a short forward walk finds it,
+    else a binary search."""
+    m = ukey.shape[0]
+    c = cur[r]
+    ok = c >= 0 and (c == 0 or ukey[c - 1] < target)
+    if ok:
+        steps = 0
+        while c < m and ukey[c] < target and steps < 8:
+            c += 1
+            steps += 1
+        ok = c >= m or ukey[c] >= target
+    if not ok:
+        lo = 0
+        hi = m
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if ukey[mid] < target:
+                lo = mid + 1
+            else:
+                hi = mid
+        c = lo
+    cur[r] = c
+    return c
+
+
+@njit(inline="always")
+def _scan_packed(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, bits, rcut2, cap, scr_rk, cnt_r):
+    """Partners of rows a0..a1 among rows b0..b1 (shifted by -s) into the scratch rows
+    ``scr_rk[i - a0]`` as ``j | bits`` (the image code in the high bits); ``own``: only j > i."""
     for i in range(a0, a1):
         xi = xs_nc[i, 0] - sx
         yi = xs_nc[i, 1] - sy
         zi = xs_nc[i, 2] - sz
-        cnt = cnt_n[i]
+        t = i - a0
+        cnt = cnt_r[t]
         q0 = b0
         if own:
             q0 = i + 1
@@ -240,15 +373,14 @@ def _scan(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, code, rcut2, cap, nbr_nk, img_
             # branch-free: every candidate is written at the next free slot,
             # which only a hit keeps (a hit or miss is a coin toss here)
             if cnt < cap:
-                nbr_nk[i, cnt] = j
-                img_nk[i, cnt] = code
+                scr_rk[t, cnt] = np.uint32(j) | bits
             cnt += 1 if dx * dx + dy * dy + dz * dz < rcut2 else 0
-        cnt_n[i] = cnt
+        cnt_r[t] = cnt
 
 
 @njit(cache=True, parallel=True)
-def _fill_half_stencil(xs_nc, start, nslot, periodic_s, runs_r4, slotbox_s3, slotmult_s,
-                       rcut2, cap, nbr_nk, img_nk, cnt_n):
+def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4, slotbox_s3, slotmult_s,
+                rcut2, cap, shift, cblk_b, slab_b, maxrows, pool_p, first_n, need_b):
     """Half list over sorted particles in one pass: own cell (j > i) + 13 forward cells.
 
     Cells are indexed in "slot" order (slot 0 slowest); ``nslot``/``periodic_s`` are
@@ -258,91 +390,162 @@ def _fill_half_stencil(xs_nc, start, nslot, periodic_s, runs_r4, slotbox_s3, slo
     The forward stencil is walked as runs of cells along the fastest slot
     (``runs_r4`` = d0, d1, first and last d2; :data:`HALF_RUNS`): cells of a
     run are consecutive rows, so a run is one scan unless it wraps a periodic
-    face.  Row i gets its partners in stencil order in ``nbr_nk[i, :cnt_n[i]]``.
-    cnt_n may exceed cap (the maximum is returned), then the caller retries
-    with a larger cap.
+    face.  The rows of the cells of a run are found in the dense starts
+    ``dstart`` or, with ``sparse``, among the occupied cells ``ukey`` (a cursor
+    per run walks them forward).
+
+    Work is split into blocks of occupied cells (``cblk_b``); block b writes its
+    rows' partners, in stencil order, one after the other into its slab
+    ``pool_p[slab_b[b]:slab_b[b+1]]`` as ``j | code << shift`` (uint32), row i's
+    count into ``first_n[i + 1]`` and what it needed into ``need_b[b]``.  Rows
+    are gathered per cell in a scratch of ``cap`` partners per row.  Returns the
+    largest row count: above ``cap`` (or a block needing more than its slab) the
+    caller retries with more room.
     """
     m0 = nslot[0]
     m1 = nslot[1]
     m2 = nslot[2]
     nr = runs_r4.shape[0]
-    for c in prange(m0 * m1 * m2):
-        a0 = start[c]
-        a1 = start[c + 1]
-        if a1 == a0:
-            continue
-        for i in range(a0, a1):
-            cnt_n[i] = 0
-        g2 = c % m2
-        g1 = (c // m2) % m1
-        g0 = c // (m2 * m1)
-        for r in range(nr):
-            h0 = g0 + runs_r4[r, 0]
-            h1 = g1 + runs_r4[r, 1]
-            i0 = 0
-            i1 = 0
-            if h0 < 0 or h0 >= m0:
-                if not periodic_s[0]:
-                    continue
-                i0 = -1 if h0 < 0 else 1
-                h0 -= i0 * m0
-            if h1 < 0 or h1 >= m1:
-                if not periodic_s[1]:
-                    continue
-                i1 = -1 if h1 < 0 else 1
-                h1 -= i1 * m1
-            base = (h0 * m1 + h1) * m2
-            # segments of consecutive cells with one image along the fastest slot
-            seg_lo = -1
-            seg_hi = -1
-            seg_i2 = 0
-            for d2 in range(runs_r4[r, 2], runs_r4[r, 3] + 2):
-                last = d2 == runs_r4[r, 3] + 1
-                h2 = 0
-                i2 = 0
-                ok = False
-                if not last:
-                    h2 = g2 + d2
-                    ok = True
-                    if h2 < 0 or h2 >= m2:
-                        if periodic_s[2]:
-                            i2 = -1 if h2 < 0 else 1
-                            h2 -= i2 * m2
-                        else:
-                            ok = False
-                if ok and seg_lo >= 0 and i2 == seg_i2 and h2 == seg_hi + 1:
-                    seg_hi = h2
-                    continue
-                if seg_lo >= 0:
-                    b0 = start[base + seg_lo]
-                    b1 = start[base + seg_hi + 1]
-                    if b1 > b0:
-                        own = r == 0 and base + seg_lo == c
-                        sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + seg_i2 * slotbox_s3[2, 0]
-                        sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + seg_i2 * slotbox_s3[2, 1]
-                        sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + seg_i2 * slotbox_s3[2, 2]
-                        code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + seg_i2 * slotmult_s[2]
-                        _scan(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, code, rcut2, cap, nbr_nk, img_nk,
-                              cnt_n)
+    nq = ukey.shape[0]
+    nblk = cblk_b.shape[0] - 1
+    rowmax_b = np.zeros(nblk, np.int64)
+    for b in prange(nblk):
+        scr = np.empty((maxrows, cap), np.uint32)
+        lc = np.zeros(maxrows, np.int64)
+        cur = np.full(nr, -1, np.int64)
+        pos = slab_b[b]
+        end = slab_b[b + 1]
+        rmax = 0
+        for q in range(cblk_b[b], cblk_b[b + 1]):
+            a0 = ustart[q]
+            a1 = ustart[q + 1]
+            for t in range(a1 - a0):
+                lc[t] = 0
+            c = ukey[q]
+            g2 = c % m2
+            g1 = (c // m2) % m1
+            g0 = c // (m2 * m1)
+            for r in range(nr):
+                h0 = g0 + runs_r4[r, 0]
+                h1 = g1 + runs_r4[r, 1]
+                i0 = 0
+                i1 = 0
+                if h0 < 0 or h0 >= m0:
+                    if not periodic_s[0]:
+                        continue
+                    i0 = -1 if h0 < 0 else 1
+                    h0 -= i0 * m0
+                if h1 < 0 or h1 >= m1:
+                    if not periodic_s[1]:
+                        continue
+                    i1 = -1 if h1 < 0 else 1
+                    h1 -= i1 * m1
+                base = (h0 * m1 + h1) * m2
+                # segments of consecutive cells with one image along the fastest slot
                 seg_lo = -1
-                if ok:
-                    seg_lo = h2
-                    seg_hi = h2
-                    seg_i2 = i2
+                seg_hi = -1
+                seg_i2 = 0
+                for d2 in range(runs_r4[r, 2], runs_r4[r, 3] + 2):
+                    last = d2 == runs_r4[r, 3] + 1
+                    h2 = 0
+                    i2 = 0
+                    ok = False
+                    if not last:
+                        h2 = g2 + d2
+                        ok = True
+                        if h2 < 0 or h2 >= m2:
+                            if periodic_s[2]:
+                                i2 = -1 if h2 < 0 else 1
+                                h2 -= i2 * m2
+                            else:
+                                ok = False
+                    if ok and seg_lo >= 0 and i2 == seg_i2 and h2 == seg_hi + 1:
+                        seg_hi = h2
+                        continue
+                    if seg_lo >= 0:
+                        if sparse:
+                            q0 = _lower(ukey, base + seg_lo, cur, r)
+                            q1 = q0
+                            while q1 < nq and ukey[q1] <= base + seg_hi:
+                                q1 += 1
+                            b0 = ustart[q0]
+                            b1 = ustart[q1]
+                        else:
+                            b0 = dstart[base + seg_lo]
+                            b1 = dstart[base + seg_hi + 1]
+                        if b1 > b0:
+                            own = r == 0 and base + seg_lo == c
+                            sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + seg_i2 * slotbox_s3[2, 0]
+                            sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + seg_i2 * slotbox_s3[2, 1]
+                            sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + seg_i2 * slotbox_s3[2, 2]
+                            code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + seg_i2 * slotmult_s[2]
+                            bits = np.uint32(code) << np.uint32(shift)
+                            _scan_packed(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, bits, rcut2, cap, scr, lc)
+                    seg_lo = -1
+                    if ok:
+                        seg_lo = h2
+                        seg_hi = h2
+                        seg_i2 = i2
+            for t in range(a1 - a0):
+                k = lc[t]
+                first_n[a0 + t + 1] = k
+                rmax = max(rmax, k)
+                if k <= cap and pos + k <= end:
+                    for u in range(k):
+                        pool_p[pos + u] = scr[t, u]
+                pos += k
+        need_b[b] = pos - slab_b[b]
+        rowmax_b[b] = rmax
     m = 0
-    for i in range(cnt_n.shape[0]):
-        m = max(m, cnt_n[i])
+    for b in range(nblk):
+        m = max(m, rowmax_b[b])
     return m
 
 
+@njit(cache=True)
+def _close_slabs(pool_p, slab_b, need_b, first_n):
+    """Move the slabs' pairs together (in place, in block order) and turn the row counts in
+    ``first_n[1:]`` into CSR offsets; returns the number of pairs."""
+    dst = 0
+    for b in range(need_b.shape[0]):
+        src = slab_b[b]
+        m = need_b[b]
+        if src != dst:
+            for u in range(m):
+                pool_p[dst + u] = pool_p[src + u]
+        dst += m
+    first_n[0] = 0
+    for i in range(first_n.shape[0] - 1):
+        first_n[i + 1] += first_n[i]
+    return dst
+
+
+@njit(cache=True)
+def _cell_blocks(ustart, rows):
+    """Blocks of consecutive occupied cells of about ``rows`` rows each: (cblk_b, rows_b, maxrows)."""
+    nq = ustart.shape[0] - 1
+    n = ustart[nq]
+    nblk = max(1, (n + rows - 1) // rows)
+    cblk = np.zeros(nblk + 1, np.int64)
+    b = 1
+    maxrows = 1
+    for q in range(nq):
+        maxrows = max(maxrows, ustart[q + 1] - ustart[q])
+        while b < nblk and ustart[q + 1] >= b * rows:
+            cblk[b] = q + 1
+            b += 1
+    for k in range(b, nblk + 1):
+        cblk[k] = nq
+    rows_b = np.empty(nblk, np.int64)
+    for k in range(nblk):
+        rows_b[k] = ustart[cblk[k + 1]] - ustart[cblk[k]]
+    return cblk, rows_b, maxrows
+
+
 @njit(cache=True, parallel=True)
-def _compact(nbr_nk, img_nk, cnt_n, first_n, j_p, img_p):
-    n = cnt_n.shape[0]
-    for i in prange(n):
-        p = first_n[i]
-        for q in range(cnt_n[i]):
-            j_p[p + q] = nbr_nk[i, q]
-            img_p[p + q] = img_nk[i, q]
+def _pack(j_p, img_p, shift, out_p):
+    for p in prange(j_p.shape[0]):
+        out_p[p] = np.uint32(j_p[p]) | (np.uint32(img_p[p]) << np.uint32(shift))
 
 
 @njit(cache=True, parallel=True)
@@ -483,6 +686,114 @@ def _displacement(pos_nc, ref_nc, out2):
     return _disp_result(out2)
 
 
+# -- the local rebuild test: bricks -----------------------------------------------------------------
+
+#: most occupied bricks of the local rebuild test (their pairs are checked each time the global test fails)
+MAX_BRICKS = 512
+#: fixed particle chunks of the brick pass (the result does not depend on the thread count)
+BRICK_CHUNKS = 16
+
+
+@njit(cache=True)
+def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3):
+    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
+    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
+    positions; returns the number of occupied bricks, or -1 beyond ``maxb``."""
+    n = pos_nc.shape[0]
+    h = 4
+    while h < 4 * maxb:
+        h *= 2
+    hkey = np.full(h, -1, np.int64)
+    hval = np.empty(h, np.int64)
+    m = 0
+    inv = 1.0 / side
+    for i in range(n):
+        key = 0
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
+            key = key * nb_c[d] + k
+        s = int((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)) & (h - 1)   # Fibonacci hashing
+        while hkey[s] != -1 and hkey[s] != key:
+            s = (s + 1) & (h - 1)
+        if hkey[s] == -1:
+            if m == maxb:
+                return -1
+            hkey[s] = key
+            hval[s] = m
+            for d in range(3):
+                blo_b3[m, d] = np.inf
+                bhi_b3[m, d] = -np.inf
+            m += 1
+        b = hval[s]
+        brick_n[i] = b
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            blo_b3[b, d] = min(blo_b3[b, d], w)
+            bhi_b3[b, d] = max(bhi_b3[b, d], w)
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _brick_displacements(pos_nc, ref_nc, brick_n, nb, acc_tb6, out_b6):
+    """Bounding box of the displacements ``pos - ref`` of each brick: (min xyz, max xyz)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    for t in prange(nt):
+        for b in range(nb):
+            for d in range(3):
+                acc_tb6[t, b, d] = np.inf
+                acc_tb6[t, b, 3 + d] = -np.inf
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            b = brick_n[i]
+            for d in range(3):
+                x = pos_nc[i, d] - ref_nc[i, d]
+                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
+                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
+    for b in range(nb):
+        for d in range(3):
+            lo = np.inf
+            hi = -np.inf
+            for t in range(nt):
+                lo = min(lo, acc_tb6[t, b, d])
+                hi = max(hi, acc_tb6[t, b, 3 + d])
+            out_b6[b, d] = lo
+            out_b6[b, 3 + d] = hi
+
+
+@njit(cache=True)
+def _bricks_safe(disp_b6, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+    """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b (a == b
+    too), |centre_a - centre_b| + r_a + r_b (centres and half-diagonals of their displacement
+    boxes bound any |d_i - d_j|) is at most max(skin, S_ab - rc), S_ab the distance between
+    their position boxes at the build (a pair not listed was at least cutoff + skin and at
+    least S_ab apart)."""
+    nb = disp_b6.shape[0]
+    mid = np.empty((nb, 3))
+    rad = np.empty(nb)
+    for b in range(nb):
+        r2 = 0.0
+        for d in range(3):
+            mid[b, d] = 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
+            r2 += 0.25 * (disp_b6[b, 3 + d] - disp_b6[b, d]) ** 2
+        rad[b] = math.sqrt(r2)
+    for a in range(nb):
+        for b in range(a, nb):
+            s2 = 0.0
+            c2 = 0.0
+            for d in range(3):
+                g = max(0.0, blo_b3[b, d] - bhi_b3[a, d], blo_b3[a, d] - bhi_b3[b, d])
+                if periodic_c[d]:
+                    g = min(g, max(0.0, blo_b3[a, d] + box_c[d] - bhi_b3[b, d]),
+                            max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
+                s2 += g * g
+                c2 += (mid[a, d] - mid[b, d]) ** 2
+            bound = math.sqrt(c2) + rad[a] + rad[b]
+            if not bound <= max(skin, math.sqrt(s2) - rc):
+                return False
+    return True
+
+
 def _box_key(cell, pbc):
     """What :meth:`NeighborList.update` compares to tell whether the box changed since the build."""
     return (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
@@ -535,7 +846,8 @@ class NeighborList:
         loop reads memory nearly in sequence.  The Atoms are never reordered;
         :meth:`pairs` and :attr:`offset_nc` answer in the caller's order.  A
         sorted half list on a grid with >= 3 cells along every periodic axis is
-        built in one pass over the own cell and 13 forward cells.
+        built in one pass over the own cell and 13 forward cells, its pairs
+        packed as ``j | image code << shift`` (:attr:`jp_p`).
     centered : bool, default False
         Rebuild test.  False: when a particle moved more than ``skin/2`` since
         the last build.  True: when both that and the half-diagonal of the
@@ -543,39 +855,74 @@ class NeighborList:
         translation is subtracted, so a block moving as a whole, e.g. the
         material behind a shock front, triggers no rebuild of its own).  Both
         are rigorous: no pair closer than the cutoff is ever missing.
+    cells : {"auto", "dense", "sparse"}
+        Cell structure of a sorted list.  "dense": an array over every cell of
+        the bounding box; "sparse": only the occupied cells, sorted by key
+        (radix sort), their neighbours found by a forward walk over them, so
+        memory and time are O(N) however far the particles spread.  "auto"
+        (default): dense while the bounding box has at most
+        :data:`DENSE_CELLS_PER_PARTICLE` cells per particle, else sparse.  Both
+        give the same list in the same order.
 
     Attributes
     ----------
-    first_n : (N+1,) int64, j_p : (P,) int32, img_p : (P,) int16
-        CSR pair list (see module docstring); over sorted rows when ``sort``.
+    first_n : (N+1,) int64
+        CSR offsets (see module docstring); over sorted rows when ``sort``.
+    j_p : (P,) int32, img_p : (P,) int16
+        Partner and image code of each pair (decoded from :attr:`jp_p` for sorted lists).
+    jp_p : (P,) uint32 or None
+        Sorted lists: ``j | img << img_shift`` (the form the kernels read).
+    img_shift : int
+        Bit position of the image code in :attr:`jp_p` (27 for the half-stencil list).
     perm_n : (N,) int64 or None
         With ``sort``: sorted row k is particle ``perm_n[k]``.
     offs_nc : (N, 3) float64
         With ``sort``: wrap offsets of the sorted rows.
+    xs_nc : (N, 3) float64
+        With ``sort``: a buffer of sorted positions (wrapped positions at the
+        build; the Cluster Dynamics calculator gathers each step's into it).
     offset_nc : (N, 3) float64
         Wrap of each particle into the box at the last build (caller's order).
     image_sc : (S, 3) float64
-        Cartesian lattice translations indexed by ``img_p``.
+        Cartesian lattice translations indexed by the image codes.
     nbuilds : int
         Number of builds so far.
+    last_cells : str
+        "dense", "sparse" or "coarse" (the unsorted or full-stencil search on a
+        grid coarsened to at most :data:`MAX_CELLS_PER_PARTICLE` cells per particle).
     """
 
-    def __init__(self, cutoff, skin=0.0, half=True, sort=False, centered=False):
+    def __init__(self, cutoff, skin=0.0, half=True, sort=False, centered=False, cells="auto"):
         if not (float(cutoff) > 0):
             raise InputError("cutoff", cutoff, "a positive distance")
         if not (float(skin) >= 0):
             raise InputError("skin", skin, "a distance >= 0")
+        if cells not in ("auto", "dense", "sparse"):
+            raise InputError("cells", cells, "'auto', 'dense' or 'sparse'")
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.half = bool(half)
         self.sort = bool(sort)
         self.centered = bool(centered)
+        self.cells = cells
         self.nbuilds = 0
         self.ref_nc = None
         self.perm_n = None
+        self.jp_p = None
+        self.img_shift = 0
+        self.xs_nc = None
+        self.offs_nc = None
+        self.last_cells = None
+        self._j_p = None
+        self._img_p = None
         self._key = None
         self._cap = 0
-        self._work = {}
+        self._pool = np.empty(0, np.uint32)
+        self._slab_need = None
+        self._ppr = (8.0, 8.0)          # pairs per row at the last build: mean, largest of a block
+        self._bricks = None             # the local rebuild test (centered lists): see _set_bricks
+        self._brick_side = 0.0
+        self.nlocal = 0                 # rebuilds the local test saved
         self._disp = np.zeros((DISP_BLOCKS, 7))
 
     def update(self, positions, cell, pbc, displacement=None):
@@ -609,17 +956,25 @@ class NeighborList:
             return not m <= lim
         else:
             m, h2 = _displacement(pos, self.ref_nc, self._disp)
-        return not (m <= lim or h2 <= lim)
+        if m <= lim or h2 <= lim:
+            return False
+        if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
+            brick_n, blo, bhi, box, periodic_c, acc, disp = self._bricks
+            _brick_displacements(pos, self.ref_nc, brick_n, blo.shape[0], acc, disp)
+            if _bricks_safe(disp, blo, bhi, box, periodic_c, self.skin, self.cutoff):
+                self.nlocal += 1
+                return False
+        return True
 
     def _grid(self, pos, cell, pbc):
+        """Cells of side >= cutoff + skin over the box (periodic axes) and the bounding box (open
+        ones): (lo, cell sizes, cell counts, stencil reach, periodic flags, periodic box, rcut)."""
         box_c, periodic_c = check_cell(cell, pbc)
         n = pos.shape[0]
         if not np.all(np.isfinite(pos)):
             bad = np.nonzero(~np.isfinite(pos).all(axis=1))[0]
             raise InputError("positions", f"non-finite at particles {bad[:5].tolist()}", "finite values")
         rcut = self.cutoff + self.skin
-        wpos = np.empty_like(pos)
-        _wrap(pos, box_c, periodic_c, wpos)
         lo = np.zeros(3)
         ext = np.zeros(3)
         for d in range(3):
@@ -629,13 +984,14 @@ class NeighborList:
                 lo[d] = pos[:, d].min()
                 ext[d] = pos[:, d].max() - lo[d]
         ncell = np.ones(3, np.int64)
-        cs = np.ones(3)
         for d in range(3):
-            ncell[d] = max(1, int(math.floor(ext[d] / rcut))) if ext[d] > 0 else 1
-        # coarsen a dilute grid (fragments flying apart) so cells stay O(N)
-        while ncell.prod() > MAX_CELLS_PER_PARTICLE * max(n, 1) + 27:
-            big = np.argmax(ncell)
-            ncell[big] = max(1, ncell[big] // 2)
+            ncell[d] = max(1, int(min(math.floor(ext[d] / rcut), 2 ** 62))) if ext[d] > 0 else 1
+        return lo, ext, ncell, periodic_c, np.where(periodic_c, box_c, 0.0), rcut
+
+    @staticmethod
+    def _sizes(ext, ncell, periodic_c, rcut):
+        """Cell sizes and stencil reach for the cell counts ``ncell``."""
+        cs = np.ones(3)
         krange = np.ones(3, np.int64)
         for d in range(3):
             cs[d] = ext[d] / ncell[d] if ext[d] > 0 else rcut
@@ -644,16 +1000,29 @@ class NeighborList:
             krange[d] = max(1, int(math.ceil(rcut / cs[d] - 1e-12)))
             if not periodic_c[d]:
                 krange[d] = 1
-        box = np.where(periodic_c, box_c, 0.0)
-        return wpos, lo, cs, ncell, krange, periodic_c, box, rcut
+        return cs, krange
+
+    @staticmethod
+    def _coarsen(ncell, limit):
+        """Halve the largest cell count until the grid has at most ``limit`` cells (dilute,
+        exploding samples on the dense and unsorted paths)."""
+        ncell = ncell.copy()
+        while float(np.prod(ncell.astype(float))) > limit:
+            big = np.argmax(ncell)
+            ncell[big] = max(1, ncell[big] // 2)
+        return ncell
 
     def build(self, positions, cell, pbc):
         pos = np.ascontiguousarray(positions, dtype=np.float64)
-        wpos, lo, cs, ncell, krange, periodic_c, box, rcut = self._grid(pos, cell, pbc)
+        geo = self._grid(pos, cell, pbc)
+        if pos.shape[0] >= 2 ** 31:
+            raise InputError("positions", f"{pos.shape[0]} particles", "fewer than 2**31 per list")
         if self.sort:
-            self._build_sorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
+            self._build_sorted(pos, *geo)
         else:
-            self._build_unsorted(pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut)
+            self._build_unsorted(pos, *geo)
+        if self.centered:
+            self._set_bricks(pos, geo)
         if self.ref_nc is not None and self.ref_nc.shape == pos.shape:
             np.copyto(self.ref_nc, pos)
         else:
@@ -661,13 +1030,37 @@ class NeighborList:
         self._key = _box_key(cell, pbc)
         self.nbuilds += 1
 
-    def _scratch(self, name, shape, dtype):
-        """A build's work array, kept between builds (fresh pages cost a page fault each)."""
-        a = self._work.get(name)
-        if a is None or a.shape != shape or a.dtype != dtype:
-            a = np.empty(shape, dtype)
-            self._work[name] = a
-        return a
+    def _set_bricks(self, pos, geo):
+        """The local rebuild test's bricks: cubes of at least 8 (cutoff + skin), doubled until at
+        most :data:`MAX_BRICKS` are occupied.
+
+        The global test (:meth:`_moved`) bounds every pair's change by the spread of all
+        displacements; when it fails, the bricks bound it pair of bricks by pair of bricks,
+        using how far apart the bricks were at the build: an expanding cloud whose
+        neighbourhoods move together keeps its list.  Brick of each particle: 4 bytes.
+        """
+        lo, ext, ncell, periodic_c, box, rcut = geo
+        n = pos.shape[0]
+        self._bricks = None
+        if n < 2:
+            return
+        side = 8.0 * rcut          # from the positions alone: a restart rebuilds the same bricks
+        boxw = np.where(periodic_c, box, 1.0)
+        brick_n = np.empty(n, np.int32)
+        blo = np.empty((MAX_BRICKS, 3))
+        bhi = np.empty((MAX_BRICKS, 3))
+        while True:
+            nb_c = np.array([max(1, int(min(math.floor(ext[d] / side), 2 ** 20)) + 1) for d in range(3)], np.int64)
+            if float(np.prod(nb_c.astype(float))) < 2.0 ** 62:
+                m = _assign_bricks(pos, boxw, periodic_c, lo, side, nb_c, MAX_BRICKS, brick_n, blo, bhi)
+                if m > 0:
+                    break
+            side *= 2.0
+        self._brick_side = side
+        if m < 2:
+            return
+        self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
+                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 6)))
 
     def _image_table(self, krange, box):
         kx, ky, kz = krange
@@ -677,8 +1070,12 @@ class NeighborList:
         img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
         return np.ascontiguousarray(img * box[None, :])
 
-    def _build_unsorted(self, pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut):
+    def _build_unsorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
         n = pos.shape[0]
+        ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
+        cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
+        wpos = np.empty_like(pos)
+        _wrap(pos, np.where(periodic_c, box, 1.0), periodic_c, wpos)
         cell_n, start, order = _bin_particles(wpos, lo, 1.0 / cs, ncell)
         first_n = np.zeros(n + 1, np.int64)
         dummy_j = np.empty(0, np.int32)
@@ -692,64 +1089,145 @@ class NeighborList:
         _search(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
                 self.half, False, first_n, j_p, img_p)
         self.image_sc = self._image_table(krange, box)
-        self.first_n, self.j_p, self.img_p = first_n, j_p, img_p
+        self.first_n, self._j_p, self._img_p = first_n, j_p, img_p
+        self.jp_p = None
         self.perm_n = None
         self._offset_nc = wpos - pos
+        self.last_cells = "coarse"
 
-    def _build_sorted(self, pos, wpos, lo, cs, ncell, krange, periodic_c, box, rcut):
+    def _sorted_buffers(self, n):
+        if self.xs_nc is None or self.xs_nc.shape[0] != n:
+            self.xs_nc = np.empty((n, 3))
+            self.offs_nc = np.empty((n, 3))
+            self.perm_n = np.empty(n, np.int64)
+            self.first_n = np.zeros(n + 1, np.int64)
+        return self.perm_n, self.xs_nc, self.offs_nc
+
+    def _build_sorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
         n = pos.shape[0]
+        perm, xs, offs = self._sorted_buffers(n)
+        boxw = np.where(periodic_c, box, 1.0)
+        fast = self.half and all(ncell[d] >= 3 for d in range(3) if periodic_c[d])
+        if fast:
+            # keys of (k0 n1 + k1) n2 + k2 must fit in int64: for spreads beyond 2^62 cells the widest
+            # axes get wider cells (a bounded key space, not a bounded memory: sparse memory is O(N))
+            ncell = self._coarsen(ncell, 2.0 ** 62)
+        cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
+        fast = fast and bool(np.all(krange == 1))
         # slowest-varying cell axis: the one with most cells (thinnest layers, so a
         # contiguous block of rows touches few rows outside itself)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        xs = np.empty((n, 3))
-        offs = self._scratch("offs", (n, 3), np.float64)
-        cell_s = self._scratch("cell", (n,), np.int64)
-        perm, start = _sort_by_cell(wpos, pos, lo, 1.0 / cs, ncell, axes, xs, offs, cell_s)
-        fast = self.half and np.all(krange == 1) and all(ncell[d] >= 3 for d in range(3) if periodic_c[d])
-        if fast:
-            nslot = ncell[axes]
-            periodic_s = periodic_c[axes].copy()
-            slotbox = np.zeros((3, 3))
-            for q, d in enumerate(axes):
-                slotbox[q, d] = box[d]
-            slotmult = np.array([9, 3, 1], np.int64)[axes]
-            cap = self._cap or 16
-            while True:
-                nbr = self._scratch("nbr", (n, cap), np.int32)
-                img = self._scratch("img", (n, cap), np.int16)
-                cnt = self._scratch("cnt", (n,), np.int64)
-                m = _fill_half_stencil(xs, start, nslot, periodic_s, HALF_RUNS, slotbox,
-                                       slotmult, rcut * rcut, cap, nbr, img, cnt)
-                if m <= cap:
-                    break
-                cap = int(m * 1.25) + 4
-            self._cap = cap
-            first_n = np.zeros(n + 1, np.int64)
-            np.cumsum(cnt, out=first_n[1:])
-            npairs = int(first_n[-1])
-            j_p = np.empty(npairs, np.int32)
-            img_p = np.empty(npairs, np.int16)
-            _compact(nbr, img, cnt, first_n, j_p, img_p)
-            self.image_sc = self._image_table(np.ones(3, np.int64), box)
+        if not fast:
+            self._build_sorted_search(pos, lo, ext, ncell, periodic_c, box, rcut, axes)
+            return
+        dense_cells = float(np.prod(ncell.astype(float)))
+        sparse = (self.cells == "sparse"
+                  or (self.cells == "auto" and dense_cells > DENSE_CELLS_PER_PARTICLE * max(n, 1) + 27))
+        if sparse:
+            ukey, ustart = _sort_sparse(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+            dstart = np.empty(0, np.int64)
         else:
-            first_n = np.zeros(n + 1, np.int64)
-            dummy_j = np.empty(0, np.int32)
-            dummy_i = np.empty(0, np.int16)
-            # _search decodes cells with x slowest: re-bin the sorted rows that way
-            cell_x, start_x, order_x = _bin_particles(xs, lo, 1.0 / cs, ncell)
-            _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
-                    self.half, True, first_n, dummy_j, dummy_i)
-            np.cumsum(first_n, out=first_n)
-            npairs = int(first_n[-1])
-            j_p = np.empty(npairs, np.int32)
-            img_p = np.empty(npairs, np.int16)
-            _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
-                    self.half, False, first_n, j_p, img_p)
-            self.image_sc = self._image_table(krange, box)
-        self.first_n, self.j_p, self.img_p = first_n, j_p, img_p
-        self.perm_n = perm
-        self.offs_nc = offs
+            ukey, ustart, dstart = _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+        if n >= 2 ** HALF_SHIFT:
+            raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
+        nslot = ncell[axes]
+        periodic_s = periodic_c[axes].copy()
+        slotbox = np.zeros((3, 3))
+        for q, d in enumerate(axes):
+            slotbox[q, d] = box[d]
+        slotmult = np.array([9, 3, 1], np.int64)[axes]
+        cblk, rows_b, maxrows = _cell_blocks(ustart, FILL_BLOCK_ROWS)
+        need = self._slab_need
+        cap = self._cap or 16
+        first_n = self.first_n
+        nblk = rows_b.shape[0]
+        mean, top = self._ppr
+        if need is not None and need.shape[0] == nblk:
+            est = np.maximum((need * SLAB_MARGIN).astype(np.int64), (rows_b * mean).astype(np.int64))
+        else:
+            est = (rows_b * (top * 1.1)).astype(np.int64)
+        est += 64
+        while True:
+            slab = np.zeros(nblk + 1, np.int64)
+            np.cumsum(est, out=slab[1:])
+            if self._pool.shape[0] < slab[-1]:
+                self._pool = np.empty(int(slab[-1]), np.uint32)
+            need_b = np.empty(nblk, np.int64)
+            m = _fill_slabs(xs, ukey, ustart, dstart, sparse, nslot, periodic_s, HALF_RUNS, slotbox, slotmult,
+                            rcut * rcut, cap, HALF_SHIFT, cblk, slab, maxrows, self._pool, first_n, need_b)
+            if m > cap:
+                cap = int(m * 1.25) + 4
+            elif np.any(need_b > est):
+                est = np.maximum(est, (need_b * SLAB_MARGIN).astype(np.int64) + 64)
+            else:
+                break
+        self._cap = cap
+        self._slab_need = need_b
+        self._ppr = (float(need_b.sum() / max(n, 1)), float((need_b / np.maximum(rows_b, 1)).max()))
+        npairs = _close_slabs(self._pool, slab, need_b, first_n)
+        self.jp_p = self._pool[:npairs]
+        self.img_shift = HALF_SHIFT
+        self._j_p = self._img_p = None
+        self.image_sc = self._image_table(np.ones(3, np.int64), box)
         self._offset_nc = None
+        self.last_cells = "sparse" if sparse else "dense"
+
+    def _build_sorted_search(self, pos, lo, ext, ncell, periodic_c, box, rcut, axes):
+        """Sorted list by the full-stencil search (thin periodic boxes, full lists)."""
+        n = pos.shape[0]
+        perm, xs, offs = self._sorted_buffers(n)
+        boxw = np.where(periodic_c, box, 1.0)
+        ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
+        cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
+        axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
+        _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+        first_n = self.first_n
+        first_n[:] = 0
+        dummy_j = np.empty(0, np.int32)
+        dummy_i = np.empty(0, np.int16)
+        # _search decodes cells with x slowest: re-bin the sorted rows that way
+        cell_x, start_x, order_x = _bin_particles(xs, lo, 1.0 / cs, ncell)
+        _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
+                self.half, True, first_n, dummy_j, dummy_i)
+        np.cumsum(first_n, out=first_n)
+        npairs = int(first_n[-1])
+        j_p = np.empty(npairs, np.int32)
+        img_p = np.empty(npairs, np.int16)
+        _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
+                self.half, False, first_n, j_p, img_p)
+        self.image_sc = self._image_table(krange, box)
+        nimg = self.image_sc.shape[0]
+        shift = 32 - max(1, int(nimg - 1).bit_length())
+        if n > 2 ** shift:
+            raise InputError("positions", f"{n} particles", f"at most 2**{shift} with {nimg} periodic images "
+                             "(a box thinner than two cut-offs along a periodic axis)")
+        if self._pool.shape[0] < npairs:
+            self._pool = np.empty(npairs, np.uint32)
+        _pack(j_p, img_p, shift, self._pool)
+        self.jp_p = self._pool[:npairs]
+        self.img_shift = shift
+        self._j_p, self._img_p = j_p, img_p
+        self._offset_nc = None
+        self.last_cells = "coarse"
+
+    @property
+    def j_p(self):
+        """(P,) int32 partner rows of the pairs."""
+        if self._j_p is None and self.jp_p is not None:
+            self._j_p = (self.jp_p & np.uint32((1 << self.img_shift) - 1)).astype(np.int32)
+        return self._j_p
+
+    @property
+    def img_p(self):
+        """(P,) int16 image codes of the pairs (rows of :attr:`image_sc`)."""
+        if self._img_p is None and self.jp_p is not None:
+            self._img_p = (self.jp_p >> np.uint32(self.img_shift)).astype(np.int16)
+        return self._img_p
+
+    @property
+    def j_mask(self):
+        """Mask of the partner row in :attr:`jp_p`."""
+        return np.uint32((1 << self.img_shift) - 1)
 
     @property
     def offset_nc(self):
@@ -763,6 +1241,14 @@ class NeighborList:
     @property
     def npairs(self):
         return int(self.first_n[-1])
+
+    def memory_bytes(self):
+        """Bytes of the arrays the list keeps between builds (list, permutation, buffers)."""
+        arrs = [self.ref_nc, self.perm_n, self.xs_nc, self.offs_nc, self.first_n, self._pool,
+                self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
+        if self._bricks is not None:
+            arrs += [a for a in self._bricks if isinstance(a, np.ndarray)]
+        return int(sum(a.nbytes for a in arrs if a is not None))
 
     def sorted_positions(self, positions, out=None):
         """Wrapped positions in the list's row order (sorted lists), Angstrom."""

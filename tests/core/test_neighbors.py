@@ -105,3 +105,61 @@ def test_non_orthorhombic_periodic_cell_refused():
         nl.build(np.zeros((2, 3)), cell, True)
     nl.build(np.array([[0, 0, 0], [0.5, 0, 0]]), cell, False)        # open: the cell does not matter
     assert nl.npairs == 1
+
+
+def _debris_cloud(seed, n=600):
+    """A compact lump, a cloud spread over a box 20 times wider, and a few far particles."""
+    rng = np.random.default_rng(seed)
+    lump = rng.uniform(0, 4.0, (n // 2, 3))
+    cloud = rng.normal(0, 20.0, (n // 2 - 3, 3))
+    cloud[: 60] = cloud[:60] * 0.02 + cloud[60:120] * 0.5          # small clumps inside the cloud
+    far = np.array([[3.0e3, 0, 0], [3.0e3 + 0.5, 0.3, 0], [-2.0e2, 5e2, 1e3]])
+    return np.vstack([lump, cloud, far])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sparse_cells_give_ase_pairs_on_a_debris_cloud(seed):
+    """Sparse (occupied) cells and the dense grid give ASE's pairs, in the same order."""
+    from ase import Atoms
+    from ase.neighborlist import neighbor_list
+    pos = _debris_cloud(seed)
+    rc = 1.1
+    atoms = Atoms("H%d" % len(pos), positions=pos, pbc=False)
+    i, j, d = neighbor_list("ijd", atoms, rc)
+    ref = {(int(a), int(b)) for a, b in zip(i, j)}
+    lists = {}
+    for cells in ("auto", "sparse", "dense"):
+        # (the dense grid of the cloud with its far particles would have 1e9 cells: without them)
+        p = pos if cells != "dense" else pos[:-3]
+        nl = NeighborList(rc, 0.3, half=True, sort=True, centered=True, cells=cells)
+        nl.build(p, np.zeros((3, 3)), False)
+        ii, jj, dd, rr = nl.pairs(p)
+        k = rr < rc
+        got = {(int(a), int(b)) for a, b in zip(ii[k], jj[k])} | {(int(b), int(a)) for a, b in zip(ii[k], jj[k])}
+        want = ref if cells != "dense" else {q for q in ref if max(q) < len(p)}
+        assert got == want and 2 * k.sum() == len(want)
+        lists[cells] = (nl.last_cells, nl.perm_n.copy(), nl.first_n.copy(), nl.jp_p.copy())
+    assert lists["auto"][0] == "sparse" and lists["dense"][0] == "dense"
+    assert all(np.array_equal(a, b) for a, b in zip(lists["auto"][1:], lists["sparse"][1:]))
+    nl = NeighborList(rc, 0.3, half=True, sort=True, centered=True, cells="sparse")
+    nl.build(pos[:-3], np.zeros((3, 3)), False)        # the same cloud: the same list in the same order
+    assert all(np.array_equal(a, b) for a, b in zip((nl.perm_n, nl.first_n, nl.jp_p), lists["dense"][1:]))
+
+
+def test_list_memory_does_not_grow_with_the_bounding_box():
+    """One particle 1e7 cut-offs away: the list keeps the memory (and pairs) of the compact sample."""
+    atoms = fcc_packing("Al", 1.0, size=(10, 10, 10), pbc=False)
+    pos = atoms.positions
+    nl = NeighborList(1.15, 0.25, half=True, sort=True, centered=True)
+    nl.build(pos, atoms.cell.array, False)
+    compact, pairs = nl.memory_bytes(), nl.npairs
+    far = np.vstack([pos, [[1.4e7, -3.0e6, 2.0e6]]])
+    nl2 = NeighborList(1.15, 0.25, half=True, sort=True, centered=True)
+    nl2.build(far, atoms.cell.array, False)
+    assert nl2.last_cells == "sparse" and nl2.npairs == pairs
+    assert nl2.memory_bytes() < 1.05 * compact + 4096
+    assert nl2.memory_bytes() < 250 * len(far)
+    # the unsorted list coarsens its grid instead: bounded too
+    nl3 = NeighborList(1.15, 0.25)
+    nl3.build(far, atoms.cell.array, False)
+    assert nl3.npairs == pairs
