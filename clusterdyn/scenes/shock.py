@@ -111,13 +111,15 @@ def _rule(u_km_s):
             AUTO_CELL_R0 * float(np.interp(u_km_s, rows[:, 0], rows[:, 2])))
 
 
-def shock_size(u, size="auto", direction="100", fit_from="auto", r0=1.0):
+def shock_size(u, size="auto", direction="100", fit_from="auto", r0=1.0, min_width=0.0):
     """Sample size and fit-window start of a shock at piston speed ``u`` (ASE units).
 
     ``size="auto"``: the sample length along the shock from :data:`AUTO_RULE`
     (measured on aluminium: the shortest sample that is steady at u, with a
     margin), rounded up to whole repeat cells, and a cross-section of at least
-    :data:`AUTO_WIDTH_R0`; ``"autoxNYxNZ"`` keeps the given cross-section; a
+    :data:`AUTO_WIDTH_R0` and of ``min_width`` (in r0: two-phase samples ask
+    for two inclusion diameters, so that an inclusion sits in a cross-section
+    of its own size and more); ``"autoxNYxNZ"`` keeps the given cross-section; a
     tuple ``(nx, ny, nz)`` is used as given.  ``fit_from="auto"``: the front
     travel after which the fit window starts (the end of the start-up
     transient, :data:`AUTO_RULE`); a number is that travel in r0 (0: the window
@@ -132,7 +134,7 @@ def shock_size(u, size="auto", direction="100", fit_from="auto", r0=1.0):
     rep = repeat_lengths(direction, 1.0)
     if isinstance(size, str):
         if size == "auto":
-            across = tuple(int(math.ceil(AUTO_WIDTH_R0 / rep[k] - 1e-9)) for k in (1, 2))
+            across = tuple(int(math.ceil(max(AUTO_WIDTH_R0, min_width) / rep[k] - 1e-9)) for k in (1, 2))
         else:
             across = tuple(int(x) for x in size[5:].split("x"))
         size = (int(math.ceil(length / rep[0] - 1e-9)),) + across
@@ -160,7 +162,7 @@ PARAMS = [
           choices=("100", "110", "111")),
     SampleSize("repeat cells along the shock and across it (the first along the shock); auto: the sample "
                "length that is steady at u (100-300 [100] cells, measured on aluminium; shock_size), 6x6 cells "
-               "across; autoxNYxNZ: that length with the given cross-section"),
+               "across (two-phase: at least two inclusion diameters across); autoxNYxNZ: that length with the given cross-section"),
     AutoNumber("fit_from", "auto", "front travel (in r0) before the fit window of D and of the state behind "
                "the front starts; auto: the end of the start-up transient at u (shock_size); 0: from 20% of "
                "the sample"),
@@ -336,12 +338,14 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size="auto", r
         raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
     if not u > 0:
         raise InputError("u", u, "a positive piston speed")
-    size, fit_from = shock_size(u, size, direction, fit_from, r0)
+    two_phase_sample = inclusion not in (None, "none")
+    size, fit_from = shock_size(u, size, direction, fit_from, r0,
+                                min_width=2 * inclusion_diameter / r0 if two_phase_sample else 0.0)
     if attraction not in ("all", "initial"):
         raise InputError("attraction", attraction, "'all' or 'initial'")
     hist = None if u_history is None else piston_history(u_history, u)
     info = None
-    if inclusion in (None, "none"):
+    if not two_phase_sample:
         atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
     else:
         atoms = two_phase(mat, inclusion, inclusion_fraction, inclusion_diameter, r0=r0, size=size,
@@ -584,8 +588,9 @@ class ShockScene(SceneDef):
     @staticmethod
     def size(v):
         """The sample's repeat cells (``size=auto`` resolved, :func:`shock_size`)."""
+        two = v["inclusion"] not in (None, "none")
         return shock_size(v["u"], tuple(v["size"]) if isinstance(v["size"], list) else v["size"],
-                          v["direction"])[0]
+                          v["direction"], min_width=2 * v["inclusion_diameter"] / v["r0"] if two else 0.0)[0]
 
     def setup(self, v, stage):
         size = v["size"] if isinstance(v["size"], str) else tuple(v["size"])

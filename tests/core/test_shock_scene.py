@@ -64,3 +64,17 @@ def test_top_of_the_u_range_runs_and_above_is_refused():
     assert size == (140, 6, 6) and fit_from > 0          # what the defaults run at the top
     with pytest.raises(InputError, match="u="):
         scene.parse({"u": f"{U_MAX + 0.1:g}km/s"})
+
+
+def test_two_phase_auto_size_fits_the_inclusions(tmp_path):
+    """size=auto with inclusions: a cross-section of at least two inclusion diameters, so the
+    default two-phase sample (56 um inclusions at r0 = 5 um) is built and exported, not refused."""
+    from clusterdyn.scenes.shock import shock_size
+    from clusterdyn import units
+    assert shock_size(3 * units.km_s)[0] == (120, 6, 6)
+    # 2 x 56 um = 22.4 r0 across; a [100] repeat cell is sqrt(2) r0: 16 cells
+    assert shock_size(3 * units.km_s, min_width=22.4)[0] == (120, 16, 16)
+    scene = get_scene("shock")
+    v = scene.parse({"inclusion": "B4C"})
+    assert scene.size(v) == (120, 16, 16)
+    assert scene.size(scene.parse({"inclusion": "B4C", "size": "autox8x8"})) == (120, 8, 8)
