@@ -99,3 +99,9 @@ def matplotlib_agg():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def plain_ledger(ledger):
+    """An energy ledger (:meth:`clusterdyn.md.DampedVerlet.energy_ledger`) as JSON-encodable values:
+    floats, and lists for the vector entries (``removed_momentum``)."""
+    return {k: (np.asarray(x).tolist() if np.ndim(x) else float(x)) for k, x in ledger.items()}

@@ -42,7 +42,7 @@ from ..build.lattice import SQRT2
 from ..errors import InputError
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg
+from .common import matplotlib_agg, plain_ledger
 from .lifecycle import SceneDef, Stage, scene_params
 from .shock import build_shock
 
@@ -245,7 +245,7 @@ class DustingScene(SceneDef):
                  "residual {residual:.3g}".format(**L)]
         for r in v.get("_retried", []):
             notes.append(f"time step halved after a stop: {r}")
-        extra = {"ledger_eV": {k: float(x) for k, x in L.items()}, "n_particles": sm["n"], "n_steps": sm["nsteps"],
+        extra = {"ledger_eV": plain_ledger(L), "n_particles": sm["n"], "n_steps": sm["nsteps"],
                  "stepping_time_s": sm["t_run"],
                  "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()},
                  "t_end_us": sm["t_end"] / units.us, "area_um2": info["area"] / units.um ** 2,

@@ -41,7 +41,7 @@ from ..build.lattice import SQRT2
 from ..errors import InputError
 from ..materials import get_material
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg
+from .common import matplotlib_agg, plain_ledger
 from .lifecycle import SceneDef, Stage, scene_params
 from .plate_impact import ImpactRecord, build_impact, impact_info, write_visar_csv
 
@@ -272,7 +272,7 @@ def spall_quantities(sm, v):
              f"aluminium {lo:g}-{hi:g} GPa at 1e5-1e6 /s",
              f"{sm['name']}: energy ledger (eV): kinetic {L['kinetic']:.6g}, potential {L['potential']:.6g}, damping "
              f"loss {L['damping_loss']:.6g}, energy in {L['energy_in']:.6g}, residual {L['residual']:.3g}"]
-    ex = {"ledger_eV": {k: float(x) for k, x in L.items()}, "pullback": {k: _num(x) for k, x in pb.items()},
+    ex = {"ledger_eV": plain_ledger(L), "pullback": {k: _num(x) for k, x in pb.items()},
           "waves": {k: _num(x) for k, x in ws.items()}, "plane": plane,
           "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()}}
     return q, notes, ex
