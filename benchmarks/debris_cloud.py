@@ -36,7 +36,6 @@ import argparse
 import csv
 import gc
 import json
-import math
 import os
 import subprocess
 import sys
@@ -48,36 +47,12 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 RESULTS = HERE / "results"
+
+from _procmem import reset_peak, status, trim  # noqa: E402  (benchmarks/ on the path)
 FIELDS = ["run", "chunk", "step", "time_ns", "N", "removed", "wall_s", "cpu_s", "rate_wall", "rate_cpu",
           "builds", "saved_by_local_test", "cells", "pairs_per_particle", "ext_x_r0", "ext_y_r0", "ext_z_r0",
           "largest_side_growth", "volume_growth", "peak_bytes_per_particle", "slab_N", "slab_rate_wall",
           "slab_rate_cpu", "ratio_wall", "ratio_cpu", "load"]
-
-
-def _status(key):
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(key + ":"):
-                return int(line.split()[1]) * 1024
-    return -1
-
-
-def _trim():
-    """glibc's malloc_trim(0): free heap pages back to the system (the process' size counts
-    memory in use)."""
-    try:
-        import ctypes
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
-
-
-def _reset_peak():
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-    except OSError:
-        pass
 
 
 def _warm(J):
@@ -88,7 +63,7 @@ def _warm(J):
     t.dyn.run(2)
     del t
     gc.collect()
-    return _status("VmRSS")
+    return status("VmRSS")
 
 
 def build(a, region):
@@ -172,9 +147,9 @@ def worker_run(a):
     nl = atoms.calc.nl
     # the peak from here on: building the sample (lattices, overlap checks) is not the run
     gc.collect()
-    _trim()
+    trim()
     base = max(base, 0)
-    _reset_peak()
+    reset_peak()
     from _states import shock_state
     n0 = len(atoms)
     slab_state = shock_state(max(1, round(n0 / 1024)), a.slab_fraction)
@@ -201,7 +176,7 @@ def worker_run(a):
                "builds": nl.nbuilds - nb0, "saved_by_local_test": nl.nlocal - ns0, "cells": nl.last_cells,
                "pairs_per_particle": nl.npairs / n, "ext_x_r0": ext[0] / r0, "ext_y_r0": ext[1] / r0,
                "ext_z_r0": ext[2] / r0, "largest_side_growth": grow, "volume_growth": vol,
-               "peak_bytes_per_particle": (_status("VmHWM") - base) / n0, "slab_N": s["N"],
+               "peak_bytes_per_particle": (status("VmHWM") - base) / n0, "slab_N": s["N"],
                "slab_rate_wall": s["rate_wall"], "slab_rate_cpu": s["rate_cpu"],
                "ratio_wall": nmean * a.chunk / wall / s["rate_wall"], "ratio_cpu": nmean * a.chunk / cpu / s["rate_cpu"],
                "load": os.getloadavg()[0]}

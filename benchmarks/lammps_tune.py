@@ -51,6 +51,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 RESULTS = HERE / "results"
 
+from _procmem import reset_peak, status, trim  # noqa: E402  (benchmarks/ on the path)
+
 #: table configurations tried (style, points)
 TABLES = [("linear", 1000), ("linear", 2000), ("linear", 5000), ("linear", 10000), ("linear", 20000),
           ("linear", 100000), ("spline", 1000), ("spline", 2000), ("spline", 5000), ("spline", 10000)]
@@ -63,23 +65,6 @@ DEFAULT_NEIGH = NEIGH[0]
 
 
 # -- workers (own processes) -----------------------------------------------------------------------
-
-def _status(key):
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(key + ":"):
-                return int(line.split()[1]) * 1024
-    return -1
-
-
-def _trim():
-    """glibc's malloc_trim(0): the free heap pages (e.g. left by h5py's chunked reads) go back to the
-    system, so the process' size counts memory in use."""
-    try:
-        import ctypes
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
 
 
 def worker_cd(a):
@@ -96,18 +81,13 @@ def worker_cd(a):
     tiny.dyn.run(2)
     del tiny
     gc.collect()
-    base = _status("VmRSS")
+    base = status("VmRSS")
     atoms, dyn, extra = load_state(a.state, J=J)
     dyn.run(2)                      # kernels from the on-disk cache, first forces
     n = len(atoms)
     gc.collect()
-    _trim()                         # free heap left by reading the checkpoint back to the system
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        reset = True
-    except OSError:
-        reset = False
+    trim()                         # free heap left by reading the checkpoint back to the system
+    reset = reset_peak()
     nb0 = atoms.calc.nl.nbuilds
     t0 = time.perf_counter()
     c0 = time.process_time()
@@ -117,7 +97,7 @@ def worker_cd(a):
     print(json.dumps({"engine": "clusterdyn", "N": n, "J": J, "threads": a.threads, "steps": a.steps,
                       "time_s": t, "cpu_s": cpu, "rate": n * a.steps / t,
                       "builds": atoms.calc.nl.nbuilds - nb0,
-                      "peak_bytes_per_particle": (_status("VmHWM") - base) / n if reset else float("nan")}))
+                      "peak_bytes_per_particle": (status("VmHWM") - base) / n if reset else float("nan")}))
 
 
 # -- decks -----------------------------------------------------------------------------------------

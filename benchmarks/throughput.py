@@ -42,26 +42,13 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
 RESULTS = HERE / "results"
+
+from _procmem import reset_peak, status  # noqa: E402  (benchmarks/ on the path)
 
 
 # -- helpers run inside the workers ----------------------------------------------------------------
-
-def _status(key):
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(key + ":"):
-                return int(line.split()[1]) * 1024
-    return -1
-
-
-def _reset_peak():
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        return True
-    except OSError:
-        return False
 
 
 def worker_cd(a):
@@ -80,7 +67,7 @@ def worker_cd(a):
     t_compile = time.perf_counter() - t0
     del tiny
     gc.collect()
-    base = _status("VmRSS")
+    base = status("VmRSS")
     t0 = time.perf_counter()
     s = build_shock(size=(a.nx, 16, 16), u=3 * units.km_s, J=J)
     t_setup = time.perf_counter() - t0
@@ -97,12 +84,12 @@ def worker_cd(a):
         export_lammps(s.atoms, s.calc, s.dyn, a.export, nsteps=a.steps, frames=0)
         out["t_export_s"] = time.perf_counter() - t0
     gc.collect()
-    reset = _reset_peak()
+    reset = reset_peak()
     nb0 = s.calc.nl.nbuilds
     t0 = time.perf_counter()
     s.dyn.run(a.steps)
     t = time.perf_counter() - t0
-    hwm = _status("VmHWM")
+    hwm = status("VmHWM")
     out.update({"time_s": t, "rate": n * a.steps / t, "builds": s.calc.nl.nbuilds - nb0,
                 "peak_bytes_per_particle": (hwm - base) / n if reset else float("nan"),
                 "pairs_per_particle": s.calc.nl.npairs / n,

@@ -26,7 +26,6 @@ cells of the 3x3x3 stencil.  The caller's arrays are never reordered.
 
 import math
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -1070,6 +1069,21 @@ class NeighborList:
         img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
         return np.ascontiguousarray(img * box[None, :])
 
+    def _count_and_fill(self, xs, cell_n, start, order, ncell, krange, periodic_c, box, rcut, first_n):
+        """The full-stencil search in two passes: count each row's pairs into ``first_n`` (zeroed,
+        (n + 1,)), turn the counts into row offsets, then fill the partner rows and image codes.
+
+        Returns (j_p (P,) int32, img_p (P,) int16)."""
+        _search(xs, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
+                self.half, True, first_n, np.empty(0, np.int32), np.empty(0, np.int16))
+        np.cumsum(first_n, out=first_n)
+        npairs = int(first_n[-1])
+        j_p = np.empty(npairs, np.int32)
+        img_p = np.empty(npairs, np.int16)
+        _search(xs, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
+                self.half, False, first_n, j_p, img_p)
+        return j_p, img_p
+
     def _build_unsorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
         n = pos.shape[0]
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
@@ -1078,16 +1092,8 @@ class NeighborList:
         _wrap(pos, np.where(periodic_c, box, 1.0), periodic_c, wpos)
         cell_n, start, order = _bin_particles(wpos, lo, 1.0 / cs, ncell)
         first_n = np.zeros(n + 1, np.int64)
-        dummy_j = np.empty(0, np.int32)
-        dummy_i = np.empty(0, np.int16)
-        _search(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
-                self.half, True, first_n, dummy_j, dummy_i)
-        np.cumsum(first_n, out=first_n)
-        npairs = int(first_n[-1])
-        j_p = np.empty(npairs, np.int32)
-        img_p = np.empty(npairs, np.int16)
-        _search(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut * rcut,
-                self.half, False, first_n, j_p, img_p)
+        j_p, img_p = self._count_and_fill(wpos, cell_n, start, order, ncell, krange, periodic_c, box, rcut,
+                                          first_n)
         self.image_sc = self._image_table(krange, box)
         self.first_n, self._j_p, self._img_p = first_n, j_p, img_p
         self.jp_p = None
@@ -1183,18 +1189,11 @@ class NeighborList:
         _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
         first_n = self.first_n
         first_n[:] = 0
-        dummy_j = np.empty(0, np.int32)
-        dummy_i = np.empty(0, np.int16)
         # _search decodes cells with x slowest: re-bin the sorted rows that way
         cell_x, start_x, order_x = _bin_particles(xs, lo, 1.0 / cs, ncell)
-        _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
-                self.half, True, first_n, dummy_j, dummy_i)
-        np.cumsum(first_n, out=first_n)
-        npairs = int(first_n[-1])
-        j_p = np.empty(npairs, np.int32)
-        img_p = np.empty(npairs, np.int16)
-        _search(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut * rcut,
-                self.half, False, first_n, j_p, img_p)
+        j_p, img_p = self._count_and_fill(xs, cell_x, start_x, order_x, ncell, krange, periodic_c, box, rcut,
+                                          first_n)
+        npairs = j_p.shape[0]
         self.image_sc = self._image_table(krange, box)
         nimg = self.image_sc.shape[0]
         shift = 32 - max(1, int(nimg - 1).bit_length())
