@@ -297,7 +297,8 @@ def register_scene(scene):
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer"]
+SCENE_MODULES = ["shock", "plate_impact", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer",
+                 "mca_friction"]
 
 
 def all_scenes():
