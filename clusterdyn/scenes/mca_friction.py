@@ -40,7 +40,7 @@ from .lifecycle import SceneDef, Stage, scene_params
 
 MATERIALS = ("alumina", "concrete", "Al6061", "copper")
 #: energy per unit thickness (1 Angstrom) -> J per metre of thickness
-JM = 1.0 / units.J / (units.m / units.Ang) if hasattr(units, "Ang") else 1.0 / units.J / units.m
+JM = units.m / units.J
 #: mu0 is given in MPa per m/s
 MU0_UNIT = units.MPa / units.m_s
 
@@ -51,7 +51,7 @@ def _params():
         Param("material", "alumina", "lower block material", kind="choice", choices=MATERIALS),
         Param("material_top", "alumina", "upper block material", kind="choice", choices=MATERIALS),
         Param("d", 10.0, "automaton size (2R)", unit="um", low=0.0, low_open=True),
-        Param("size", (24, 4), "each block: periodic length x height in automaton sizes", kind="ints", low=3),
+        Param("size", (24, 4), "each block: periodic length x height in automaton sizes", kind="ints", low=2),
         Param("stress", 0.05, "normal stress pressing the blocks together (> 0)", unit="GPa"),
         Param("V", 20.0, "sliding speed of the upper block's top row", unit="m/s"),
         Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s (>= 0)"),
@@ -220,8 +220,8 @@ class FrictionScene(SceneDef):
     def check(self, v):
         _check_coefficients(v)
         L, H = v["size"]
-        if H < 2:
-            raise InputError("size", f"{L}x{H}", "blocks at least 2 automaton sizes high")
+        if L < 3:
+            raise InputError("size", f"{L}x{H}", "a periodic length of at least 3 automaton sizes")
 
     def setup(self, v, stage):
         atoms, dyn, info = build_friction(v)
