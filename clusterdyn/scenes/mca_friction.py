@@ -64,8 +64,8 @@ def _params():
         Param("l2", 1.0, "mean half-period of sinusoid 2", unit="um"),
         Param("d2", 5.0, "regularity length of sinusoid 2", unit="um"),
         Param("v_reg", 0.001, "regularising velocity of the dry part", unit="m/s", low=0.0, low_open=True),
-        Param("steps_w", 2, "explicit method: width of the steps cut in the surfaces (automata)", kind="int",
-              low=1),
+        Param("steps_w", 2, "explicit method: width of the steps cut in the surfaces (automata; 0 = none: "
+              "the bare rows of automata)", kind="int", low=0),
         Param("steps", 6000, "time steps (dt = 0.15 d / c_L)", kind="int", low=100),
         Param("ramp", 0.1, "fraction of the run ramping the stress (then as much ramping V)", low=0.0,
               low_open=True, high=0.4),
