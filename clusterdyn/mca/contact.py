@@ -607,7 +607,7 @@ def stack_blocks(blocks, gap=None):
     atoms.info = dict(blocks[0].info)
     atoms.info["mca_materials"] = mats
     top = atoms.positions[:, 1].max() + 0.5 * 2 * atoms.arrays["radius"].max()
-    atoms.cell = np.diag([Lx, top, 0.0])
+    atoms.cell = np.diag([Lx, top, 1.0])      # z: the unit thickness (1 Angstrom) of plane strain
     merged = {k: np.concatenate([d[k] for d in dicts]) for k in PAIR_ARRAYS + ATOM_ARRAYS}
     merged.update({"step": 0, "time": 0.0, "version": 0})
     calc = MCA(materials=mats, dim=2)

@@ -206,6 +206,8 @@ def steady_mu(curve, t_slide, T):
     t = np.asarray(curve["time"])
     mu = np.asarray(curve["mu_dr"])
     sel = t >= t_slide + 0.5 * (T - t_slide)
+    if not sel.any():                      # a run stopped before its steady window
+        return float("nan"), float("nan"), 0
     return float(np.mean(mu[sel])), float(np.std(mu[sel])), int(sel.sum())
 
 

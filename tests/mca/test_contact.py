@@ -215,3 +215,33 @@ def test_interlocking_sections_seeded_and_clipped():
     K = runs[0][0]
     assert K.min() == 0.0 and runs[0][1] > 0          # large amplitudes: clipped, and counted
     assert K.max() > kw["K_av"] + 0.5 * kw["A1"] / (0.5 * D)
+
+
+def test_scene_restart_continues_bit_for_bit(tmp_path, monkeypatch):
+    """The scene lifecycle: a run stopped at a checkpoint and continued with --restart ends as the whole run."""
+    from clusterdyn.io.checkpoint import load_run
+    from clusterdyn.scenes import mca_friction as mf
+    from clusterdyn.scenes.base import get_scene
+    sc = get_scene("mca-friction")
+    kw = {"size": "6x2", "steps": 400, "frames": 40, "checkpoint_every": 3, "K_av": "0.1", "A1": "1um",
+          "l1": "0.05um", "d1": "0.2um", "v_reg": "0.05m/s"}
+    whole = sc.run(kw, out=tmp_path / "a", progress=False)
+    orig = mf.FrictionScene.attach
+
+    def stopping(self, v, stage, atoms, dyn, info):
+        s = orig(self, v, stage, atoms, dyn, info)
+        s.stop = lambda d: d.nsteps >= 200
+        return s
+
+    monkeypatch.setattr(mf.FrictionScene, "attach", stopping)
+    sc.run(kw, out=tmp_path / "b", progress=False)     # stopped at step 200, last checkpoint before it
+    monkeypatch.setattr(mf.FrictionScene, "attach", orig)
+    cont = sc.run({}, out=tmp_path / "b", progress=False, restart=tmp_path / "b" / "checkpoint.h5")
+    aA, dA, _ = load_run(tmp_path / "a" / "checkpoint.h5")
+    aB, dB, _ = load_run(tmp_path / "b" / "checkpoint.h5")
+    assert dA.nsteps == dB.nsteps > 200
+    assert np.array_equal(aA.positions, aB.positions) and np.array_equal(aA.get_momenta(), aB.get_momenta())
+    for k in dA.contact.hist:
+        assert np.array_equal(dA.contact.hist[k], dB.contact.hist[k])
+    assert dA.contact.clips[0] > 0
+    assert whole.quantities["mu_dr"].value == cont.quantities["mu_dr"].value
