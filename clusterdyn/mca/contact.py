@@ -441,8 +441,7 @@ class SegmentContact:
         if self.nbody < 2:
             raise InputError("body", "one body", "at least two bodies to contact")
         # pairs across bodies leave the pair table (the bodies meet through segments only)
-        rows = state.rows(np.asarray(atoms.arrays["id"], np.int64))
-        bid = np.full(rows.shape[0], -1, np.int64)
+        bid = np.full(int(np.max(atoms.arrays["id"])) + 1, -1, np.int64)
         bid[np.asarray(atoms.arrays["id"], np.int64)] = body
         cross = bid[state.pid_p2[:, 0]] != bid[state.pid_p2[:, 1]]
         if cross.any():
@@ -580,6 +579,10 @@ def stack_blocks(blocks, gap=None):
             raise InputError("blocks", "a 3D block", "2D (plane strain) blocks: the segment method is 2D only")
     mats = blocks[0].info["mca_materials"]
     Lx = blocks[0].cell[0, 0]
+    for b in blocks[1:]:
+        if bool(b.pbc[0]) != bool(blocks[0].pbc[0]) or (b.pbc[0] and abs(b.cell[0, 0] - Lx) > 1e-9 * Lx):
+            raise InputError("blocks", f"periodic x lengths {[float(x.cell[0, 0]) for x in blocks]}",
+                             "blocks with the same periodicity and the same periodic length along x")
     states = [MCAState(b) for b in blocks]
     parts, dicts = [], []
     y = 0.0

@@ -161,6 +161,9 @@ def test_viscous_part_linear_in_speed():
         (mu, sd, n), dyn = _scene_mu(mu1="0", mu0=str(mu0), V=f"{V}m/s")
         vals.append(mu / V)
     vals = np.array(vals)
+    st, body = dyn.state, dyn.atoms.arrays["body"]
+    rows = st.rows(dyn.atoms.arrays["id"])
+    assert np.all(body[rows[st.pid_p2[:, 0]]] == body[rows[st.pid_p2[:, 1]]])   # no ordinary contact across
     assert vals.min() > 0
     assert np.ptp(vals) < 0.03 * vals.mean()
     # slope against the law: mu_dr = mu0 V sum(r0) / F_N with every contact sliding at V
