@@ -469,6 +469,8 @@ def _mca_save(dyn):
            "interfaces": [[float(a), float(b), float(t), float(c)] for (a, b), (t, c) in st.interfaces.items()]}
     run = {"dt": float(dyn.dt), "damping": float(dyn.damping), "contact_every": int(dyn.contact_every),
            "check_timestep": bool(dyn.check_timestep), "hold_layer_rotation": bool(dyn.hold_layer_rotation)}
+    if getattr(dyn, "contact", None) is not None:      # the segment contact's parameters (its history: dynamics)
+        run["contact"] = dyn.contact.params()
     out = {"dynamics": dyn.get_state(), "calculator": cal, "run": run}
     if "mca_materials" in dyn.atoms.info:          # Material objects: stored as records in 'calculator'
         out["info"] = {"mca_materials": [m.name for m in st.materials]}
@@ -491,9 +493,14 @@ def _mca_load(atoms, state, **kwargs):
     interfaces = {(int(a), int(b)): (float(t), float(c)) for a, b, t, c in cal.get("interfaces") or []}
     atoms.calc = MCA(materials=mats, interfaces=interfaces or None, dim=int(cal["dim"]))
     r = state["run"]
+    contact = None
+    if "contact" in r:
+        from clusterdyn.mca.contact import SegmentContact
+        contact = SegmentContact(**r["contact"])
     return MCADynamics(atoms, timestep=float(r["dt"]), damping=float(r["damping"]),
                        contact_every=int(r["contact_every"]), check_timestep=bool(r["check_timestep"]),
-                       hold_layer_rotation=bool(r["hold_layer_rotation"]), state=state["dynamics"], **kwargs)
+                       hold_layer_rotation=bool(r["hold_layer_rotation"]), state=state["dynamics"],
+                       contact=contact, **kwargs)
 
 
 register_run_kind("MCADynamics", _mca_save, _mca_load)

@@ -11,6 +11,7 @@ the builders in :mod:`clusterdyn.build.mca` (with the tessellation in
 Public API::
 
     from clusterdyn.mca import MCA, MCADynamics, MCAState
+    from clusterdyn.mca import SegmentContact, stack_blocks     # 2D segment contact and friction
     from clusterdyn.build import mca_packing, precrack, notch
     from clusterdyn.materials.mca import mca_material
 """
@@ -20,6 +21,7 @@ import importlib
 _LAZY = {
     "MCA": "calculator", "MCAState": "state", "MCADynamics": "dynamics",
     "default_timestep": "dynamics", "wave_speeds": "dynamics",
+    "SegmentContact": "contact", "stack_blocks": "contact",
 }
 
 __all__ = sorted(_LAZY)

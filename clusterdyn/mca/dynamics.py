@@ -90,6 +90,11 @@ class MCADynamics(MolecularDynamics):
         grip glued to the sample); otherwise a drive leaves angular velocities alone.
     state : dict, optional
         :meth:`get_state` of a run to continue (no tessellation is made).
+    contact : :class:`~clusterdyn.mca.contact.SegmentContact`, optional
+        The segment method and friction law between bodies (2D; ``atoms.arrays['body']``):
+        its normal force joins the conservative forces, its friction is evaluated like the
+        pair damping (half-step velocities, both half kicks around a time) and its work
+        accumulates in ``contact.friction_work``; pairs across bodies leave the pair table.
 
     In 2D plane strain (``dim=2``) the drives' directions must lie in the x-y
     plane; a :class:`~clusterdyn.md.Traction` without an area gets the
@@ -97,7 +102,8 @@ class MCADynamics(MolecularDynamics):
     """
 
     def __init__(self, atoms, timestep=None, *, damping=0.0, contact_every=25, check_timestep=True,
-                 hold_layer_rotation=False, state=None, trajectory=None, logfile=None, loginterval=1, **kw):
+                 hold_layer_rotation=False, state=None, contact=None, trajectory=None, logfile=None,
+                 loginterval=1, **kw):
         calc = atoms.calc
         from .calculator import MCA
         if not isinstance(calc, MCA):
@@ -107,6 +113,9 @@ class MCADynamics(MolecularDynamics):
             calc.state = MCAState.from_dict(atoms, state, calc.materials, calc.interfaces, calc.dim)
         self.state = calc.setup(atoms)
         st = self.state
+        self.contact = contact
+        if contact is not None:
+            contact.bind(atoms, st)
         dt_def = default_timestep(atoms, st.materials)
         if timestep is None:
             timestep = dt_def
@@ -142,9 +151,17 @@ class MCADynamics(MolecularDynamics):
         self._Fd = self._Td = None
         if self.damping > 0:        # the first half kick's damping: present velocities
             self._Fd, self._Td = self._damping_forces(atoms.get_velocities(), atoms.arrays["omega"])
+        self._Ff = self._Tf = None
+        if self._friction_on:       # the first half kick's friction: present velocities, history kept
+            self._Ff, self._Tf = contact.friction(atoms, st, atoms.get_velocities(), atoms.arrays["omega"],
+                                                  self.dt, advance=False)
         if state is not None:
             self._restore_counters(state)
         self._drives()
+
+    @property
+    def _friction_on(self):
+        return self.contact is not None and self.contact.friction_on
 
     # ------------------------------------------------------------------ drives
     def _drives(self):
@@ -230,6 +247,11 @@ class MCADynamics(MolecularDynamics):
                 f_trial = out["f_nc"]
                 out = calc.evaluate(atoms, st)
                 out["f_trial"] = f_trial
+        if self.contact is not None:
+            fc = self.contact.normal(atoms, st)
+            out["f_nc"] = out["f_nc"] + fc
+            if "f_trial" in out:
+                out["f_trial"] = out["f_trial"] + fc
         self._F = out["f_nc"]
         self._T = out["t_nc"]
         self.trial = out
@@ -319,6 +341,9 @@ class MCADynamics(MolecularDynamics):
         nl.build(atoms.positions, atoms.cell.array, atoms.pbc)
         i, j, _, r = nl.pairs(atoms.positions)
         close = r < (rad[i] + rad[j]) * (1.0 + skin)
+        if self.contact is not None:         # bodies meet through segments only
+            body = atoms.arrays["body"]
+            close &= body[i] == body[j]
         i, j = i[close], j[close]
         ids = atoms.arrays["id"]
         a, b = np.minimum(ids[i], ids[j]), np.maximum(ids[i], ids[j])
@@ -349,6 +374,9 @@ class MCADynamics(MolecularDynamics):
         if self.damping > 0:                   # the damping of the last evaluation (half-step velocities)
             fd0, td0 = self._Fd, self._Td
             Fe, Te = F0 + fd0, T0 + td0
+        if self._friction_on:                  # the friction of the last evaluation
+            ff0, tf0 = self._Ff, self._Tf
+            Fe, Te = Fe + ff0, Te + tf0
         drives = self._drives()
         Fe = self._constrained(Fe)             # the step's start: a drive records only its first sample
         for d in drives:
@@ -380,6 +408,11 @@ class MCADynamics(MolecularDynamics):
             Fe, Te = F1 + fd, T1 + td
             self.dissipated -= 0.5 * (np.sum((fd0 + fd) * dx) + np.sum((td0 + td) * dth))
             self._Fd, self._Td = fd, td
+        if self._friction_on:
+            ff, tf = self.contact.friction(atoms, st, p / m, w, dt, advance=True)
+            Fe, Te = Fe + ff, Te + tf
+            self.contact.friction_work -= 0.5 * (np.sum((ff0 + ff) * dx) + np.sum((tf0 + tf) * dth))
+            self._Ff, self._Tf = ff, tf
         Fe = self._constrained(Fe)             # the drives record their forces at the step's end
         p += h * Fe
         w += h * Te / J
@@ -432,6 +465,11 @@ class MCADynamics(MolecularDynamics):
         if self._Fd is not None:
             d["damping_forces"] = self._Fd.copy()
             d["damping_torques"] = self._Td.copy()
+        if self.contact is not None:
+            d["contact"] = self.contact.get_state()
+            if self._Ff is not None:
+                d["friction_forces"] = self._Ff.copy()
+                d["friction_torques"] = self._Tf.copy()
         return d
 
     def set_state(self, d):
@@ -447,6 +485,9 @@ class MCADynamics(MolecularDynamics):
         self._evaluate(commit=False)
         if self.damping > 0:
             self._Fd, self._Td = self._damping_forces(self.atoms.get_velocities(), self.atoms.arrays["omega"])
+        if self._friction_on:
+            self._Ff, self._Tf = self.contact.friction(self.atoms, self.state, self.atoms.get_velocities(),
+                                                       self.atoms.arrays["omega"], self.dt, advance=False)
         self._restore_counters(d)
 
     def _restore_counters(self, d):
@@ -461,6 +502,11 @@ class MCADynamics(MolecularDynamics):
         if "damping_forces" in d and self.damping > 0:
             self._Fd = np.array(d["damping_forces"], dtype=float)
             self._Td = np.array(d["damping_torques"], dtype=float)
+        if self.contact is not None and "contact" in d:
+            self.contact.set_state(d["contact"])
+            if "friction_forces" in d and self._friction_on:
+                self._Ff = np.array(d["friction_forces"], dtype=float)
+                self._Tf = np.array(d["friction_torques"], dtype=float)
 
 
 def out_f_trial(out, F1):

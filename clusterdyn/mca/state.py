@@ -345,6 +345,16 @@ class MCAState:
         self.version += 1
         return m
 
+    def remove_pairs(self, keep):
+        """Keep only the pairs where ``keep`` (P,) bool is True (e.g. drop pairs across bodies)."""
+        keep = np.asarray(keep, bool)
+        for k in PAIR_ARRAYS:
+            setattr(self, k, np.ascontiguousarray(getattr(self, k)[keep]))
+        self._flags()
+        self.version_pairs += 1
+        self.version += 1
+        return int((~keep).sum())
+
     # ------------------------------------------------------------------ checkpoint
     def get_state(self):
         d = {k: getattr(self, k).copy() for k in PAIR_ARRAYS + ATOM_ARRAYS}
