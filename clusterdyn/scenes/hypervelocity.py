@@ -64,7 +64,8 @@ from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import matplotlib_agg, thermal_noise
-from .impact_common import (IMPACT_J, announce_cost, ledger, ledger_quantities, parse_times, radiograph_frame,
+from .impact_common import (announce_cost, lateral_axes, ledger, ledger_quantities, parse_times, projectile_params,
+                            radiograph_frame,
                             retry_halved_dt, write_radiographs)
 from .lifecycle import SceneDef, Stage, scene_params
 
@@ -95,21 +96,9 @@ PARAMS = [
           low_open=True),
     Param("image_times", "auto", "radiograph times in us, comma separated, or auto (t_end/4, t_end/2, 3 t_end/4, "
           "t_end)", kind="str"),
-    Param("J", IMPACT_J, "damping Gamma = c0/(J r0); none = off (default 50: free surfaces, fragments)",
-          low=0.0, low_open=True, optional=True),
-    Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
-    Param("seed", 1, "random seed: the sphere's lattice orientation and the initial noise", kind="int", low=0),
-    Param("noise", 10.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
-    Param("dt_factor", TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + V)", low=0.0, high=0.5,
-          low_open=True),
-    Param("dt_retries", 2, "times the run starts again with half the time step after a stiffness stop",
-          kind="int", low=0),
+] + projectile_params(TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + V)") + [
     Param("axis", "z", "plate normal; the sphere flies along -axis", kind="choice", choices=("x", "y", "z")),
 ]
-
-
-def _lateral(ax):
-    return [d for d in range(3) if d != ax]
 
 
 def build_hypervelocity(v):
@@ -153,7 +142,7 @@ class HyperRecord:
     def __init__(self, atoms, dyn, info, image_times):
         self.atoms, self.dyn, self.info = atoms, dyn, info
         self.ax = int(info["axis"])
-        self.lat = _lateral(self.ax)
+        self.lat = lateral_axes(self.ax)
         self.plate = np.nonzero(atoms.arrays["body"] == 0)[0]
         self.m = atoms.get_masses()
         self.image_times = [float(t) for t in image_times]
@@ -348,7 +337,7 @@ class HypervelocityScene(SceneDef):
         files = []
         files += write_radiographs(sm["images"], out / "hypervelocity_radiographs.png",
                                    out / "hypervelocity_radiographs.csv",
-                                   labels=("xyz"[_lateral(sm["info"]["axis"])[0]], "xyz"[sm["info"]["axis"]]),
+                                   labels=("xyz"[lateral_axes(sm["info"]["axis"])[0]], "xyz"[sm["info"]["axis"]]),
                                    title=f"sphere through plate, r0 = {sm['info']['r0'] / units.mm:g} mm")
         files += write_spectrum(out / "hypervelocity_fragments.png", sm["g"])
         files += write_history(out / "hypervelocity_history.png", sm["rows"])

@@ -22,11 +22,32 @@ import numpy as np
 from .. import units
 from ..analysis.impact import projected_density
 from ..md.drives import Wall
-from .base import Quantity
+from .base import Param, Quantity
 from .common import matplotlib_agg
 
 #: the impact scenes' damping default (module docstring)
 IMPACT_J = 50.0
+
+
+def projectile_params(dt_factor, dt_help):
+    """The parameters a sphere-on-target scene shares: damping, cutoff, seed (the sphere's lattice
+    orientation and the noise), noise, the time step ``dt_factor`` (default and help text given)
+    and its retries."""
+    return [
+        Param("J", IMPACT_J, "damping Gamma = c0/(J r0); none = off (default 50: free surfaces, fragments)",
+              low=0.0, low_open=True, optional=True),
+        Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
+        Param("seed", 1, "random seed: the sphere's lattice orientation and the initial noise", kind="int", low=0),
+        Param("noise", 10.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
+        Param("dt_factor", dt_factor, dt_help, low=0.0, high=0.5, low_open=True),
+        Param("dt_retries", 2, "times the run starts again with half the time step after a stiffness stop",
+              kind="int", low=0),
+    ]
+
+
+def lateral_axes(ax):
+    """The two axes across ``ax`` (0, 1 or 2), in order."""
+    return [d for d in range(3) if d != ax]
 
 
 def ledger(dyn):

@@ -55,7 +55,8 @@ from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import thermal_noise
-from .impact_common import (IMPACT_J, announce_cost, ledger, ledger_quantities, parse_times, radiograph_frame,
+from .impact_common import (announce_cost, lateral_axes, ledger, ledger_quantities, parse_times, projectile_params,
+                            radiograph_frame,
                             retry_halved_dt, write_radiographs)
 from .lifecycle import SceneDef, Stage, scene_params
 
@@ -93,21 +94,10 @@ PARAMS = [
           low_open=True),
     Param("image_times", "auto", "radiograph times in us, comma separated, or auto (t_end/3, 2 t_end/3, t_end)",
           kind="str"),
-    Param("J", IMPACT_J, "damping Gamma = c0/(J r0); none = off (default 50: free surfaces, fragments)",
-          low=0.0, low_open=True, optional=True),
-    Param("rc", 1.15, "cutoff as a multiple of r0", low=1.0, high=1.414, low_open=True),
-    Param("seed", 1, "random seed: the sphere's lattice orientation and the initial noise", kind="int", low=0),
-    Param("noise", 10.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
-    Param("dt_factor", DT_FACTOR, "time step as a fraction of the smallest r0/(c0 + V) (default twice the "
-          "project's 0.03, module docstring)", low=0.0, high=0.5, low_open=True),
-    Param("dt_retries", 2, "times the run starts again with half the time step after a stiffness stop",
-          kind="int", low=0),
+] + projectile_params(DT_FACTOR, "time step as a fraction of the smallest r0/(c0 + V) (default twice the "
+                      "project's 0.03, module docstring)") + [
     Param("axis", "z", "the stack's axis; the sphere flies along +axis", kind="choice", choices=("x", "y", "z")),
 ]
-
-
-def _lateral(ax):
-    return [d for d in range(3) if d != ax]
 
 
 def build_multilayer(v):
@@ -177,7 +167,7 @@ class StackRecord:
             self.images.append(self.image(t))
 
     def image(self, t):
-        return radiograph_frame(self.atoms.positions, self.m, self.ax, _lateral(self.ax)[0], self.info["radius"],
+        return radiograph_frame(self.atoms.positions, self.m, self.ax, lateral_axes(self.ax)[0], self.info["radius"],
                                 self.info["r0"], t)
 
     def get_state(self):
@@ -226,7 +216,7 @@ class MultilayerScene(SceneDef):
             rec.images.append(rec.image(rec.rows[-1]["t"]))
         fr = fragments(atoms)
         ax = info["axis"]
-        lat = atoms.positions[:, _lateral(ax)]
+        lat = atoms.positions[:, lateral_axes(ax)]
         rim = np.hypot(lat[:, 0], lat[:, 1]) > info["radius"] - RIM * info["r0"]
         body = atoms.arrays["body"]
         nb = len(info["layers"]) + 1
@@ -296,7 +286,7 @@ class MultilayerScene(SceneDef):
         sm = summaries[0]
         ax = sm["info"]["axis"]
         files = write_radiographs(sm["images"], out / "multilayer_radiographs.png", out / "multilayer_radiographs.csv",
-                                  labels=("xyz"[_lateral(ax)[0]], "xyz"[ax]),
+                                  labels=("xyz"[lateral_axes(ax)[0]], "xyz"[ax]),
                                   title=f"multilayer target, r0 = {sm['info']['r0'] / units.mm:g} mm")
         path = out / "multilayer_holes.csv"
         with open(path, "w", newline="") as fh:
