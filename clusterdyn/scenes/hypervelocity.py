@@ -60,7 +60,7 @@ from ..build.bodies import combine_bodies, place, plate, sphere
 from ..calculators import ClusterDynamics
 from ..errors import InputError
 from ..materials import cd_material_names
-from ..md import DampedVerlet
+from ..md import DampedVerlet, RegionOfInterest
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import matplotlib_agg, thermal_noise
@@ -94,6 +94,10 @@ PARAMS = [
     Param("plate_material", "Al-6061-T6", "material of the plate", kind="choice", choices=CD_MATERIALS),
     Param("t_end", 8.0, "run time after contact (the hole is stable from about 3 us on)", unit="us", low=0.0,
           low_open=True),
+    Param("keep_within", None, "remove clusters that leave the cube of this half-width about the impact point "
+          "(their energy and momentum are booked in the ledger; the H5MD rows keep fill values; the cloud and "
+          "ejecta measures then see only what is inside); none = keep all",
+          unit="mm", low=0.0, low_open=True, optional=True),
     Param("image_times", "auto", "radiograph times in us, comma separated, or auto (t_end/4, t_end/2, 3 t_end/4, "
           "t_end)", kind="str"),
 ] + projectile_params(TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + V)") + [
@@ -117,7 +121,11 @@ def build_hypervelocity(v):
     calc.setup(atoms)
     c0 = max(p.c0 for p in calc.potentials)
     dt = v["dt_factor"] * r0 / (c0 + V)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+    region = None
+    if v.get("keep_within") is not None:
+        half = float(v["keep_within"])
+        region = RegionOfInterest(lo=[-half] * 3, hi=[half] * 3)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"], region=region)
     dyn.start_ledger()
     body = atoms.arrays["body"]
     z = atoms.positions[:, ax]
@@ -143,8 +151,6 @@ class HyperRecord:
         self.atoms, self.dyn, self.info = atoms, dyn, info
         self.ax = int(info["axis"])
         self.lat = lateral_axes(self.ax)
-        self.plate = np.nonzero(atoms.arrays["body"] == 0)[0]
-        self.m = atoms.get_masses()
         self.image_times = [float(t) for t in image_times]
         self.rows = []
         self.images = []
@@ -159,6 +165,7 @@ class HyperRecord:
         r0 = info["r0"]
         pos = self.atoms.positions
         vel = self.atoms.get_velocities()
+        m = self.atoms.get_masses()
         t = self.dyn.get_time() - info["t_contact"]
         hole = plate_hole(pos[self.plate], ax, info["z_rear"], info["z_front"], (0.0, 0.0), r0, self._extent())
         z = pos[:, ax]
@@ -180,10 +187,10 @@ class HyperRecord:
             apex[ax] = info["z_front"]
             n = np.zeros(3)
             n[ax] = 1.0
-            row["theta"] = cone_half_angle(pos[ej] - apex, self.m[ej], n, CONE_FRACTION)
-            row["theta50"] = cone_half_angle(pos[ej] - apex, self.m[ej], n, 0.5)
+            row["theta"] = cone_half_angle(pos[ej] - apex, m[ej], n, CONE_FRACTION)
+            row["theta50"] = cone_half_angle(pos[ej] - apex, m[ej], n, 0.5)
             row["n_ejecta"] = int(ej.sum())
-            row["ejecta_mass"] = float(self.m[ej].sum())
+            row["ejecta_mass"] = float(m[ej].sum())
         return row
 
     def frame(self, d):
@@ -194,8 +201,13 @@ class HyperRecord:
             self.image_times.pop(0)
             self.images.append(self.image(t))
 
+    @property
+    def plate(self):
+        """Rows of the plate's clusters in the current Atoms (clusters may have been removed)."""
+        return np.nonzero(self.atoms.arrays["body"] == 0)[0]
+
     def image(self, t):
-        return radiograph_frame(self.atoms.positions, self.m, self.ax, self.lat[0], self.info["radius"],
+        return radiograph_frame(self.atoms.positions, self.atoms.get_masses(), self.ax, self.lat[0], self.info["radius"],
                                 self.info["r0"], t)
 
     def get_state(self):
@@ -236,6 +248,12 @@ class HypervelocityScene(SceneDef):
         if v["radius"] < v["diameter"]:
             raise InputError("radius", f"{v['radius'] / units.mm:g}mm", f"at least the sphere diameter "
                              f"{v['diameter'] / units.mm:g} mm (the hole must not reach the edge)")
+        if v["keep_within"] is not None:
+            need = max(v["radius"], v["diameter"] + v["thickness"]) + 2 * v["r0"]
+            if v["keep_within"] < need:
+                raise InputError("keep_within", f"{v['keep_within'] / units.mm:g}mm", f"at least "
+                                 f"{need / units.mm:g} mm (the plate radius or the sphere's start, plus 2 r0: "
+                                 "the region must hold the set-up)")
         parse_times(v["image_times"], "image_times", [])
 
     def setup(self, v, stage):

@@ -57,6 +57,8 @@ def ledger(dyn):
     out = {k: float(led[k]) / units.J for k in ("kinetic0", "potential0", "kinetic", "potential", "damping_loss",
                                                  "wall_dissipated", "drive_work", "residual")}
     out["wall_work"] = float(sum(w.work for w in walls)) / units.J
+    out["removed"] = float(led["removed_kinetic"] + led["removed_potential"]) / units.J
+    out["removed_count"] = int(dyn.removed["count"])
     return out
 
 
@@ -73,9 +75,14 @@ def ledger_quantities(led):
         "E_wall_dissipated": Quantity(led["wall_dissipated"], "J", note="kinetic energy a sticking wall removed"),
         "E_residual": Quantity(led["residual"], "J", note="energy not accounted for (integration error)"),
     }
+    removed = ""
+    if led.get("removed_count", 0):
+        q["E_removed"] = Quantity(led["removed"], "J", note=f"kinetic and pair energy of the {led['removed_count']} "
+                                  "clusters removed outside the region of interest")
+        removed = f", removed {led['removed']:.4g} ({led['removed_count']} clusters)"
     note = (f"energy ledger (J): kinetic {led['kinetic0']:.4g} -> {led['kinetic']:.4g}, potential change "
             f"{led['potential'] - led['potential0']:+.4g}, damping loss {led['damping_loss']:.4g}, wall work "
-            f"{led['wall_work']:.3g}, wall dissipated {led['wall_dissipated']:.4g}, residual "
+            f"{led['wall_work']:.3g}, wall dissipated {led['wall_dissipated']:.4g}{removed}, residual "
             f"{led['residual']:+.3g} ({100 * led['residual'] / e0:+.3f}% of the initial kinetic energy)")
     return q, note
 

@@ -143,3 +143,21 @@ def test_bad_input_refused_before_work():
         get_scene("hypervelocity").run({"image_times": "soon"}, progress=False)
     with pytest.raises(InputError, match="r0"):
         get_scene("multilayer").run({"r0": "5mm"}, progress=False)
+
+
+def test_hypervelocity_removes_the_debris_beyond_its_region(tmp_path):
+    """keep_within: clusters leaving the cube are removed, their energy booked (the ledger still
+    closes), the H5MD file keeps its rows with fill values; a region that cuts the set-up is refused."""
+    from clusterdyn.errors import InputError
+    from clusterdyn.io import read_h5md
+    scene = get_scene("hypervelocity")
+    p = {"r0": "0.8mm", "radius": "12mm", "t_end": "3", "h5md_frames": "3"}
+    res = scene.run({**p, "keep_within": "14mm"}, out=tmp_path, progress=False)
+    q = res.quantities
+    assert q["E_removed"].value > 0.01 * q["E_kinetic_initial"].value      # debris took energy out
+    assert abs(q["E_residual"].value) < 1e-3 * q["E_kinetic_initial"].value
+    assert any("removed" in n for n in res.notes)
+    first, last = read_h5md(tmp_path / "hypervelocity.h5md", 0), read_h5md(tmp_path / "hypervelocity.h5md", -1)
+    assert len(last) < len(first)                  # the fill rows are dropped on reading
+    with pytest.raises(InputError, match="keep_within"):
+        scene.run({**p, "keep_within": "10mm"}, progress=False)
