@@ -10,7 +10,9 @@ shared machine):
   with outlines (Wilkins-Guinan 275 m/s L0 46.94 mm and 373 m/s L0 23.47 mm,
   Gust 200 and 358 m/s) and the L0 = 46.94 mm series at 207, 275, 367 and
   434 m/s; on the 373 m/s test also full-density masses, a sticking wall and
-  repulsive grain boundaries;
+  repulsive grain boundaries; on the 373 m/s (L0 23.47 mm) and Gust 200 m/s
+  tests the packing the flow-stress study picks for 6061-T6 and r0 = D0/20
+  and D0/30 (three resolutions with D0/25);
 * hypervelocity at r0 = 0.4 mm (seeds 1, 2, 3), 0.2667 mm and 0.2 mm;
 * multilayer at its default.
 """
@@ -22,8 +24,11 @@ from pathlib import Path
 
 PY = "python -m clusterdyn.cli run"
 
+#: the flow-stress study's closest packing to 6061-T6's flow stress, at r0 = D0/25 (grain size g in mm)
+FLOW_STRESS_PICK = "--set grain_size={g:.4g}mm --set porosity=0.2 --set rc=1.10 --set boundaries=repulsive"
+
 TAYLOR = [
-    # name, L0 mm, D0 mm, V m/s, extra
+    # name, L0 mm, D0 mm, V m/s, extra[, r0 as D0/n: n, default 25]
     ("tay_WG275_L47", 46.94, 7.62, 275, ""),
     ("tay_WG373_L23", 23.47, 7.62, 373, ""),
     ("tay_G200", 32.1, 6.3, 200, ""),
@@ -34,6 +39,14 @@ TAYLOR = [
     ("tay_WG373_L23_dense", 23.47, 7.62, 373, "--set mass=dense"),
     ("tay_WG373_L23_stick", 23.47, 7.62, 373, "--set wall=sticking"),
     ("tay_WG373_L23_rep", 23.47, 7.62, 373, "--set boundaries=repulsive"),
+    # the packing the flow-stress study picks for 6061-T6 (grains 5 r0, 20% porosity, rc 1.10, repulsive)
+    ("tay_WG373_L23_fs", 23.47, 7.62, 373, FLOW_STRESS_PICK.format(g=5 * 7.62 / 25)),
+    ("tay_G200_fs", 32.1, 6.3, 200, FLOW_STRESS_PICK.format(g=5 * 6.3 / 25)),
+    # three resolutions (with the r0 = D0/25 runs above)
+    ("tay_WG373_L23_r20", 23.47, 7.62, 373, "", 20),
+    ("tay_G200_r20", 32.1, 6.3, 200, "", 20),
+    ("tay_WG373_L23_r30", 23.47, 7.62, 373, "", 30),
+    ("tay_G200_r30", 32.1, 6.3, 200, "", 30),
 ]
 HYPER = [("hv_r0.4_s1", 0.4, 1), ("hv_r0.4_s2", 0.4, 2), ("hv_r0.4_s3", 0.4, 3), ("hv_r0.267", 0.2667, 1),
          ("hv_r0.2", 0.2, 1)]
@@ -41,11 +54,12 @@ HYPER = [("hv_r0.4_s1", 0.4, 1), ("hv_r0.4_s2", 0.4, 2), ("hv_r0.4_s3", 0.4, 3),
 
 def commands(runs):
     out = []
-    for name, L0, D0, V, extra in TAYLOR:
+    for name, L0, D0, V, extra, *div in TAYLOR:
+        n = div[0] if div else 25
         tmax = 120 if L0 > 40 else (80 if L0 < 25 else 100)
-        if "repulsive" in extra:
+        if name.endswith("_rep"):
             tmax = 40                        # the rod falls apart; the run shows how, no stop is expected
-        out.append(f"{PY} taylor --set L0={L0}mm --set D0={D0}mm --set V={V} --set r0={D0 / 25:.4g}mm "
+        out.append(f"{PY} taylor --set L0={L0}mm --set D0={D0}mm --set V={V} --set r0={D0 / n:.4g}mm "
                    f"--set t_max={tmax} {extra} --out {runs}/{name}".replace("  ", " "))
     for name, r0, seed in HYPER:
         out.append(f"{PY} hypervelocity --set r0={r0}mm --set seed={seed} --out {runs}/{name}")
@@ -116,15 +130,16 @@ def taylor_measures_now(runs, name, d):
 
 
 def taylor_table(runs):
-    rows = ["| test | V (m/s) | L0 (mm) | Lf/L0 CD / exp (err) | X/L0 CD / exp | Df/D0 CD / exp | W/D0 CD / exp "
+    rows = ["| test | V (m/s) | L0 (mm) | r0 (mm) | Lf/L0 CD / exp (err) | X/L0 CD / exp | Df/D0 CD / exp | W/D0 CD / exp "
             "| outline dev. | Y_Taylor CD / exp (GPa) | rebound (m/s) | t_end (us) | clusters | wall (s) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, L0, D0, V, extra in TAYLOR:
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, L0, D0, V, extra, *div in TAYLOR:
         d = _load(runs, name)
         if d is None:
-            rows.append(f"| {name} | {V} | {L0} | pending | | | | | | | | | |")
+            rows.append(f"| {name} | {V} | {L0} | {D0 / (div[0] if div else 25):.4g} | pending | | | | | | | | | |")
             continue
-        cells = [name.replace("tay_", "") + (f" ({extra.replace('--set ', '')})" if extra else ""), str(V), str(L0)]
+        cells = [name.replace("tay_", "") + (f" ({extra.replace('--set ', '')})" if extra else ""), str(V), str(L0),
+                 _f(d["params"]["r0"]["value"], ".4g")]
         now = taylor_measures_now(runs, name, d) or {}
 
         def val(k):
