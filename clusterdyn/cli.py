@@ -14,6 +14,7 @@ unstable gives one line naming step, particles and quantity and exit status 3.
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -238,6 +239,11 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("clusterdyn: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader of our output went away (clusterdyn list | head): stop quietly, as Unix tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":
