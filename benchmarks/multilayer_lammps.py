@@ -35,8 +35,11 @@ from clusterdyn.scenes.multilayer import StackRecord, build_multilayer
 HERE = Path(__file__).resolve().parent
 
 
-def _params(r0, radius, t_end, J):
-    return get_scene("multilayer").parse({"r0": r0, "radius": radius, "t_end": t_end, "J": J})
+def _params(r0, radius, t_end, J, dt_factor=None):
+    p = {"r0": r0, "radius": radius, "t_end": t_end, "J": J}
+    if dt_factor is not None:
+        p["dt_factor"] = str(dt_factor)
+    return get_scene("multilayer").parse(p)
 
 
 def check_forces(folder, steps=400):
@@ -74,12 +77,13 @@ def run_both(v, cd_result, ranks, folder):
     rec = StackRecord(a, dyn, info, [])
     holes = rec.holes()
     cd = json.loads(Path(cd_result).read_text())
-    out = {"r0_mm": info["r0"] / units.mm, "ranks": ranks, "lammps_wall_s": wall, "lammps_loop_s": r.loop_time,
+    out = {"r0_mm": info["r0"] / units.mm, "ranks": ranks, "lammps_wall_s": wall, "lammps_loop_s": r.loop_time_s,
            "cd_wall_s": cd["wall_time_s"], "layers": []}
     for k, (lay, d) in enumerate(zip(info["layers"], holes)):
         key = f"layer{k + 1}_{lay['material']}_hole"
-        d_cd = cd[key]["value"]
-        d_l = 0.0 if d == 0.0 else d / units.mm
+        # None / NaN: perforated, the opening reaches the plate's rim (no diameter)
+        d_cd = float("nan") if cd[key]["value"] is None else cd[key]["value"]
+        d_l = float("nan") if d is None or not np.isfinite(d) else (0.0 if d == 0.0 else d / units.mm)
         out["layers"].append({"layer": k + 1, "material": lay["material"], "cd_mm": d_cd, "lammps_mm": d_l,
                               "diff_r0": None if not (np.isfinite(d_cd) and np.isfinite(d_l))
                               else abs(d_cd - d_l) / (info["r0"] / units.mm)})
@@ -113,7 +117,9 @@ def main():
         return 0 if faithful else 2
     if not a.cd_result:
         ap.error("--cd-result is required for the comparison run")
-    v = _params(a.r0, a.radius, a.t_end, a.J)
+    # the same time step as the clusterdyn run (it may have halved its step after a stiffness stop)
+    dt_factor = json.loads(Path(a.cd_result).read_text())["params"]["dt_factor"]
+    v = _params(a.r0, a.radius, a.t_end, a.J, dt_factor)
     res = run_both(v, a.cd_result, a.ranks, folder / "run")
     res["force_check"] = chk
     print(json.dumps(res, indent=1))
