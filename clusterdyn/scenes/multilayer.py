@@ -17,8 +17,8 @@ documented estimates (docs/hugoniot.md).
 
 Reported at ``t_end`` (default 67.6 us after contact, the radiograph of the
 paper's fig. 24): for each layer whether it is perforated and the hole's
-diameter (the layer's own clusters within its original slab widened by r0
-on each side, projected on its plane: the empty r0-mesh cells connected to
+diameter (the clusters of the layer's largest remaining piece within its
+original slab widened by r0 on each side, projected on its plane: the empty r0-mesh cells connected to
 the axis, as a circle of equal area: for a thick layer the narrowest
 cross-section of the channel; NaN when the opening reaches the plate's
 rim); the mass, axial speed and make-up of the largest fragments that are
@@ -154,8 +154,14 @@ class StackRecord:
         ext = [[-R - 2 * r0, R + 2 * r0], [-R - 2 * r0, R + 2 * r0]]
         out = []
         pos = self.atoms.positions
+        # each layer's largest remaining piece: debris of the layer that still lies in its slab
+        # (ejecta, spall, petals torn off) would otherwise close the opening in projection
+        labels = fragments(self.atoms).labels
         for k, lay in enumerate(info["layers"]):
-            h = plate_hole(pos[self.rows_of[k]], self.ax, lay["lo"] - r0, lay["hi"] + r0, (0.0, 0.0), r0, ext)
+            rows = self.rows_of[k]
+            lab = labels[rows]
+            main = rows[lab == np.bincount(lab[lab >= 0]).argmax()]
+            h = plate_hole(pos[main], self.ax, lay["lo"] - r0, lay["hi"] + r0, (0.0, 0.0), r0, ext)
             out.append(h["d"])
         return out
 
