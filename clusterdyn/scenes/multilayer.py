@@ -156,7 +156,9 @@ class StackRecord:
         pos = self.atoms.positions
         # each layer's largest remaining piece: debris of the layer that still lies in its slab
         # (ejecta, spall, petals torn off) would otherwise close the opening in projection
-        labels = fragments(self.atoms).labels
+        # bonds at the run's cutoff (read from the dynamics' calculator: the Atoms measured may be a
+        # frame read back without one, e.g. a LAMMPS run of the same scene)
+        labels = fragments(self.atoms, b=self.dyn.atoms.calc.parameters["rc"]).labels
         for k, lay in enumerate(info["layers"]):
             rows = self.rows_of[k]
             lab = labels[rows]
