@@ -59,7 +59,8 @@ from .base import Results
 from ..neighbors import NeighborList, check_cell
 from ..parallel import use_threads
 
-__all__ = ["Fragments", "fragments", "FragmentAnalysis", "FragmentObserver", "FragmentFinder"]
+__all__ = ["Fragments", "fragments", "FragmentAnalysis", "FragmentObserver", "FragmentFinder", "plot_spectrum",
+           "write_spectrum_csv", "largest_piece"]
 
 SQRT2 = math.sqrt(2.0)
 #: default largest fragment counted as "small" (dusting, physics of the CD paper 3.1)
@@ -358,17 +359,8 @@ class Fragments:
 
         Returns (png path, csv path).
         """
-        png, csvp = _png_csv(path)
         gs, n = self.spectrum()
-        _write_columns(csvp, ["g", "N"], [gs, n])
-        fig, ax = _figure()
-        ax.loglog(gs, n, "o")
-        ax.set_xlabel("clusters per fragment g")
-        ax.set_ylabel("number of fragments N(g)")
-        ax.set_title(title or f"{self.n_fragments} fragments, {int(self.g.sum())} particles")
-        ax.grid(True, which="both", alpha=0.3)
-        fig.savefig(png, dpi=110)
-        return png, csvp
+        return plot_spectrum(path, gs, n, title or f"{self.n_fragments} fragments, {int(self.g.sum())} particles")
 
     def plot_mass_distribution(self, path, title=None):
         """Cumulative mass fraction against fragment mass: ``path`` (.png) + CSV (mass in kg).
@@ -394,6 +386,36 @@ def _fmt(v):
     if isinstance(v, (float, np.floating)):
         return f"{v:.8g}"
     return str(v)
+
+
+def largest_piece(labels, rows):
+    """The rows among ``rows`` that lie in the fragment holding most of them (e.g. what is left
+    of a plate after an impact: its debris and spall left out).  ``labels`` as
+    :attr:`Fragments.labels` (-1, excluded particles, never counts)."""
+    rows = np.asarray(rows)
+    lab = np.asarray(labels)[rows]
+    return rows[lab == np.bincount(lab[lab >= 0]).argmax()]
+
+
+def write_spectrum_csv(path, gs, n):
+    """The spectrum N(g) as CSV (columns g, N); returns the path."""
+    _write_columns(path, ["g", "N"], [np.asarray(gs), np.asarray(n)])
+    return Path(path)
+
+
+def plot_spectrum(path, gs, n, title=None):
+    """N(g) on log-log axes (sizes ``gs``, counts ``n``, as :meth:`Fragments.spectrum` gives them):
+    writes ``path`` (.png) and the CSV beside it (g, N).  Returns (png path, csv path)."""
+    png, csvp = _png_csv(path)
+    write_spectrum_csv(csvp, gs, n)
+    fig, ax = _figure()
+    ax.loglog(gs, n, "o")
+    ax.set_xlabel("clusters per fragment g")
+    ax.set_ylabel("number of fragments N(g)")
+    ax.set_title(title or f"{int(np.sum(n))} fragments")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.savefig(png, dpi=110)
+    return png, csvp
 
 
 def _png_csv(path):

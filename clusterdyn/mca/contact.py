@@ -486,10 +486,11 @@ class SegmentContact:
                                  g["k"], g["a"], g["b"], g["p"], g["body"], g["l"], g["r"], g["h"], g["n"],
                                  g["h0"], g["E"], g["fn"], f)
         g = {k: v[:nc] for k, v in g.items()}
-        g["R"] = (R_n[g["k"]] + R_n[g["a"]] + R_n[g["b"]]) / 3.0
+        if self.interlock:             # the meso-volume's size A = R (the interlocking law's only user)
+            g["R"] = (R_n[g["k"]] + R_n[g["a"]] + R_n[g["b"]]) / 3.0
         g["nc"] = nc
         g["nseg"] = ns
-        g["segments"] = seg[:ns].copy()
+        g["segments"] = seg[:ns]         # (automaton a, automaton b, pair row) of each surface segment
         g["energy"] = e
         g["perm"] = perm
         self.geo = g

@@ -53,7 +53,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .. import units
-from ..analysis.fragments import fragments
+from ..analysis.fragments import fragments, largest_piece, plot_spectrum
 from ..analysis.impact import cone_half_angle, plate_hole
 from ..build import parse_axis
 from ..build.bodies import combine_bodies, place, plate, sphere
@@ -277,8 +277,7 @@ class HypervelocityScene(SceneDef):
         body = atoms.arrays["body"]
         info = stage.info
         # the through-hole: every cluster of the plate's largest fragment, projected
-        lab = fr.labels[rec.plate]
-        main = rec.plate[lab == np.bincount(lab).argmax()]
+        main = largest_piece(fr.labels, rec.plate)
         through = plate_hole(atoms.positions[main], info["axis"], -np.inf, np.inf, (0.0, 0.0), info["r0"],
                              rec._extent())["d"]
         sphere_mass = np.bincount(fr.labels, weights=atoms.get_masses() * (body == 1), minlength=fr.n_fragments)
@@ -357,30 +356,10 @@ class HypervelocityScene(SceneDef):
                                    out / "hypervelocity_radiographs.csv",
                                    labels=("xyz"[lateral_axes(sm["info"]["axis"])[0]], "xyz"[sm["info"]["axis"]]),
                                    title=f"sphere through plate, r0 = {sm['info']['r0'] / units.mm:g} mm")
-        files += write_spectrum(out / "hypervelocity_fragments.png", sm["g"])
+        gs, n = np.unique(np.asarray(sm["g"]), return_counts=True)
+        files += plot_spectrum(out / "hypervelocity_fragments.png", gs, n)
         files += write_history(out / "hypervelocity_history.png", sm["rows"])
         return files
-
-
-def write_spectrum(png, g):
-    """Fragment spectrum N(g) (PNG and CSV beside it)."""
-    plt = matplotlib_agg()
-    gs, n = np.unique(np.asarray(g), return_counts=True)
-    fig, ax = plt.subplots(figsize=(5.5, 4.0))
-    ax.loglog(gs, n, "o")
-    ax.set_xlabel("clusters per fragment g")
-    ax.set_ylabel("number of fragments N(g)")
-    ax.set_title(f"{int(n.sum())} fragments")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    path = png.with_suffix(".csv")
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["g", "N"])
-        w.writerows(zip(gs.tolist(), n.tolist()))
-    return [png, path]
 
 
 def write_history(png, rows):

@@ -44,7 +44,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .. import units
-from ..analysis.fragments import fragments
+from ..analysis.fragments import fragments, largest_piece
 from ..analysis.impact import plate_hole
 from ..build import parse_axis
 from ..build.bodies import combine_bodies, place, plate_stack, sphere
@@ -160,10 +160,8 @@ class StackRecord:
         # frame read back without one, e.g. a LAMMPS run of the same scene)
         labels = fragments(self.atoms, b=self.dyn.atoms.calc.parameters["rc"]).labels
         for k, lay in enumerate(info["layers"]):
-            rows = self.rows_of[k]
-            lab = labels[rows]
-            main = rows[lab == np.bincount(lab[lab >= 0]).argmax()]
-            h = plate_hole(pos[main], self.ax, lay["lo"] - r0, lay["hi"] + r0, (0.0, 0.0), r0, ext)
+            h = plate_hole(pos[largest_piece(labels, self.rows_of[k])], self.ax, lay["lo"] - r0, lay["hi"] + r0,
+                           (0.0, 0.0), r0, ext)
             out.append(h["d"])
         return out
 

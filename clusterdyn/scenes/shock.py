@@ -142,6 +142,12 @@ def shock_size(u, size="auto", direction="100", fit_from="auto", r0=1.0, min_wid
     return tuple(int(x) for x in size), fit * r0
 
 
+def inclusion_width(inclusion, inclusion_diameter, r0):
+    """The smallest cross-section (in r0) of ``size=auto`` for a sample with ``inclusion`` (None or
+    "none": a one-phase sample, 0): two inclusion diameters."""
+    return 0.0 if inclusion in (None, "none") else 2.0 * inclusion_diameter / r0
+
+
 def suggest_size(u, size, direction="100"):
     """A sample size (text ``NXxNYxNZ``) that should make a run of ``size`` at ``u`` steady: the
     ``auto`` length when ``size`` is shorter, else twice the length (same cross-section)."""
@@ -338,14 +344,13 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size="auto", r
         raise InputError("material", material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
     if not u > 0:
         raise InputError("u", u, "a positive piston speed")
-    two_phase_sample = inclusion not in (None, "none")
     size, fit_from = shock_size(u, size, direction, fit_from, r0,
-                                min_width=2 * inclusion_diameter / r0 if two_phase_sample else 0.0)
+                                min_width=inclusion_width(inclusion, inclusion_diameter, r0))
     if attraction not in ("all", "initial"):
         raise InputError("attraction", attraction, "'all' or 'initial'")
     hist = None if u_history is None else piston_history(u_history, u)
     info = None
-    if not two_phase_sample:
+    if inclusion in (None, "none"):
         atoms = fcc_packing(mat, r0, size=size, direction=direction, pbc=(False, True, True))
     else:
         atoms = two_phase(mat, inclusion, inclusion_fraction, inclusion_diameter, r0=r0, size=size,
@@ -588,9 +593,8 @@ class ShockScene(SceneDef):
     @staticmethod
     def size(v):
         """The sample's repeat cells (``size=auto`` resolved, :func:`shock_size`)."""
-        two = v["inclusion"] not in (None, "none")
-        return shock_size(v["u"], tuple(v["size"]) if isinstance(v["size"], list) else v["size"],
-                          v["direction"], min_width=2 * v["inclusion_diameter"] / v["r0"] if two else 0.0)[0]
+        return shock_size(v["u"], tuple(v["size"]) if isinstance(v["size"], list) else v["size"], v["direction"],
+                          min_width=inclusion_width(v["inclusion"], v["inclusion_diameter"], v["r0"]))[0]
 
     def setup(self, v, stage):
         size = v["size"] if isinstance(v["size"], str) else tuple(v["size"])

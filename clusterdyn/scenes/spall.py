@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from .. import units
-from ..analysis.fragments import fragments
+from ..analysis.fragments import fragments, write_spectrum_csv
 from ..analysis.spall import LagrangianMap, pullback, ring_thickness, spall_plane, spall_strength, wave_speeds
 from ..build.lattice import SQRT2
 from ..errors import InputError
@@ -172,7 +172,8 @@ class SpallScene(SceneDef):
         for sm in summaries:
             files.append(write_visar_csv(out / f"spall_visar_{sm['name']}.csv", sm))
             files.append(write_lmap_csv(out / f"spall_stress_map_{sm['name']}.csv", sm["lmap"]))
-            files.append(write_spectrum_csv(out / f"spall_fragments_{sm['name']}.csv", sm))
+            files.append(write_spectrum_csv(out / f"spall_fragments_{sm['name']}.csv", sm["spectrum_g"],
+                                            sm["spectrum_n"]))
         return files
 
 
@@ -289,15 +290,6 @@ def write_lmap_csv(path, lmap):
         for k, t in enumerate(lmap["t"]):
             for x, s in zip(lmap["x"], lmap["stress"][k]):
                 w.writerow([f"{t / units.ns:.6g}", f"{x / units.um:.6g}", f"{s / units.GPa:.5g}"])
-    return path
-
-
-def write_spectrum_csv(path, sm):
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["g", "N"])
-        for g, n in zip(sm["spectrum_g"], sm["spectrum_n"]):
-            w.writerow([int(g), int(n)])
     return path
 
 
