@@ -53,6 +53,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .. import units
+from ..analysis.ejecta import fit_rate
 from ..analysis.fragments import fragments, largest_piece, plot_spectrum
 from ..analysis.impact import cone_half_angle, plate_hole
 from ..build import parse_axis
@@ -221,14 +222,12 @@ class HyperRecord:
 
 
 def _fit_speed(t, x):
+    """Slope of x(t) over the second half of the times where x is known (NaN: fewer than 4 known)."""
     ok = np.isfinite(x)
     t, x = np.asarray(t)[ok], np.asarray(x)[ok]
     if len(t) < 4:
         return float("nan")
-    half = t >= t[0] + 0.5 * (t[-1] - t[0])
-    if half.sum() < 3:
-        return float("nan")
-    return float(np.polyfit(t[half], x[half], 1)[0])
+    return fit_rate(t, x, t[0] + 0.5 * (t[-1] - t[0]), t[-1])[0]
 
 
 class HypervelocityScene(SceneDef):
