@@ -175,6 +175,10 @@ def worker_run(a):
         reset_peak()
         save_run(ck, dyn, extra={"ext0": ext0.tolist(), "chunk": chunk})
         peak_ck = (status("VmHWM") - base) / n0
+        # hand the checkpoint's freed buffers back before the next chunk's peak starts from the
+        # resident size (else the writer's leftovers count as the run's)
+        gc.collect()
+        trim()
         reset_peak()
         s = slab_rate(a, slab_state)
         row = {"run": a.run, "chunk": chunk, "step": dyn.nsteps, "time_ns": dyn.get_time() / (1e3 * units.fs),
