@@ -760,24 +760,68 @@ def _brick_displacements(pos_nc, ref_nc, brick_n, nb, acc_tb6, out_b6):
             out_b6[b, 3 + d] = hi
 
 
+@njit(cache=True, parallel=True)
+def _brick_radii(pos_nc, ref_nc, brick_n, disp_b6, acc_tb2, out_b2):
+    """The two largest distances of a brick's displacements from the centre of its displacement
+    box (``disp_b6`` of :func:`_brick_displacements`): (largest, second largest) per brick.
+
+    A sphere about the box's centre through the farthest displacement bounds them as the box's
+    half-diagonal does, but tighter (up to sqrt 3 for thermal motion, whose extremes along x, y
+    and z are different particles); two particles of one brick moved apart by at most the sum
+    of the two largest distances.
+    """
+    n = pos_nc.shape[0]
+    nt = acc_tb2.shape[0]
+    nb = disp_b6.shape[0]
+    for t in prange(nt):
+        for b in range(nb):
+            acc_tb2[t, b, 0] = 0.0
+            acc_tb2[t, b, 1] = 0.0
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            b = brick_n[i]
+            r2 = 0.0
+            for d in range(3):
+                x = pos_nc[i, d] - ref_nc[i, d] - 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
+                r2 += x * x
+            if r2 != r2:
+                r2 = np.inf
+            if r2 > acc_tb2[t, b, 0]:
+                acc_tb2[t, b, 1] = acc_tb2[t, b, 0]
+                acc_tb2[t, b, 0] = r2
+            elif r2 > acc_tb2[t, b, 1]:
+                acc_tb2[t, b, 1] = r2
+    for b in range(nb):
+        r1 = 0.0
+        r2 = 0.0
+        for t in range(nt):
+            for c in range(2):
+                x = acc_tb2[t, b, c]
+                if x > r1:
+                    r2 = r1
+                    r1 = x
+                elif x > r2:
+                    r2 = x
+        out_b2[b, 0] = math.sqrt(r1)
+        out_b2[b, 1] = math.sqrt(r2)
+
+
 @njit(cache=True)
-def _bricks_safe(disp_b6, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
-    """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b (a == b
-    too), |centre_a - centre_b| + r_a + r_b (centres and half-diagonals of their displacement
-    boxes bound any |d_i - d_j|) is at most max(skin, S_ab - rc), S_ab the distance between
-    their position boxes at the build (a pair not listed was at least cutoff + skin and at
-    least S_ab apart)."""
+def _bricks_safe(disp_b6, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+    """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b,
+    |centre_a - centre_b| + R_a + R_b (the centres of their displacement boxes and the largest
+    distances from them, :func:`_brick_radii`, bound any |d_i - d_j|; within one brick the two
+    largest distances) is at most max(skin, S_ab - rc), S_ab the distance between their
+    position boxes at the build (a pair not listed was at least cutoff + skin and at least
+    S_ab apart)."""
     nb = disp_b6.shape[0]
     mid = np.empty((nb, 3))
-    rad = np.empty(nb)
     for b in range(nb):
-        r2 = 0.0
         for d in range(3):
             mid[b, d] = 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
-            r2 += 0.25 * (disp_b6[b, 3 + d] - disp_b6[b, d]) ** 2
-        rad[b] = math.sqrt(r2)
     for a in range(nb):
-        for b in range(a, nb):
+        if not rad_b2[a, 0] + rad_b2[a, 1] <= skin:
+            return False
+        for b in range(a + 1, nb):
             s2 = 0.0
             c2 = 0.0
             for d in range(3):
@@ -787,7 +831,7 @@ def _bricks_safe(disp_b6, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
                             max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
                 s2 += g * g
                 c2 += (mid[a, d] - mid[b, d]) ** 2
-            bound = math.sqrt(c2) + rad[a] + rad[b]
+            bound = math.sqrt(c2) + rad_b2[a, 0] + rad_b2[b, 0]
             if not bound <= max(skin, math.sqrt(s2) - rc):
                 return False
     return True
@@ -958,9 +1002,10 @@ class NeighborList:
         if m <= lim or h2 <= lim:
             return False
         if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
-            brick_n, blo, bhi, box, periodic_c, acc, disp = self._bricks
+            brick_n, blo, bhi, box, periodic_c, acc, disp, acc2, rad = self._bricks
             _brick_displacements(pos, self.ref_nc, brick_n, blo.shape[0], acc, disp)
-            if _bricks_safe(disp, blo, bhi, box, periodic_c, self.skin, self.cutoff):
+            _brick_radii(pos, self.ref_nc, brick_n, disp, acc2, rad)
+            if _bricks_safe(disp, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
                 self.nlocal += 1
                 return False
         return True
@@ -1059,7 +1104,8 @@ class NeighborList:
         if m < 2:
             return
         self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
-                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 6)))
+                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 6)), np.empty((BRICK_CHUNKS, m, 2)),
+                        np.empty((m, 2)))
 
     def _image_table(self, krange, box):
         kx, ky, kz = krange

@@ -163,3 +163,42 @@ def test_list_memory_does_not_grow_with_the_bounding_box():
     nl3 = NeighborList(1.15, 0.25)
     nl3.build(far, atoms.cell.array, False)
     assert nl3.npairs == pairs
+
+
+def _listed_pairs(nl, pos, rc):
+    ii, jj, dd, rr = nl.pairs(pos)
+    k = rr < rc
+    return {(min(a, b), max(a, b)) for a, b in zip(ii[k].tolist(), jj[k].tolist())}
+
+
+def test_local_rebuild_test_bounds_by_the_farthest_displacements_and_misses_no_pair():
+    """Thermal-like displacements on top of a common drift: the bounding box of the displacements
+    (half-diagonal sqrt 3 times the extremes along each axis) would call for a rebuild, the two
+    farthest displacements from its centre do not; and over a run of random moves with a
+    block sliding past the rest, every pair within the cut-off is listed whenever the list
+    is kept."""
+    from scipy.spatial import cKDTree
+    rc, skin = 1.15, 0.25
+    atoms = fcc_packing("Al", 1.0, size=(10, 10, 10), pbc=False)
+    pos0 = atoms.positions
+    nl = NeighborList(rc, skin, half=True, sort=True, centered=True)
+    nl.update(pos0, np.zeros((3, 3)), False)
+    rng = np.random.default_rng(1)
+    d = rng.normal(0.0, 0.025, pos0.shape)
+    half_diag = 0.5 * np.linalg.norm(np.ptp(d, axis=0))
+    far = np.sort(np.linalg.norm(d - 0.5 * (d.max(0) + d.min(0)), axis=1))[-2:].sum()
+    assert 2 * half_diag > skin >= far                # the old bound fails, the new one holds
+    assert not nl.update(pos0 + d + [0.3, 0.0, 0.0], np.zeros((3, 3)), False)
+    assert nl.nlocal == 1 and nl.nbuilds == 1
+    # a block sliding past the rest, with random motion: never a pair missed
+    pos = pos0.copy()
+    upper = pos0[:, 2] > pos0[:, 2].mean()
+    kept = 0
+    for step in range(60):
+        pos = pos + rng.normal(0.0, 0.01, pos.shape)
+        pos[upper, 0] += 0.02
+        if not nl.update(pos, np.zeros((3, 3)), False):
+            kept += 1
+            want = {tuple(q) for q in cKDTree(pos).query_pairs(rc - 1e-9)}
+            assert want <= _listed_pairs(nl, pos, rc)
+    assert kept > 30 and nl.nbuilds > 2
