@@ -162,6 +162,15 @@ class JetsScene(ProfiledShockScene):
                                        note="eta0+ / (time from the impulse to the zero crossing of eta, 5-frame "
                                             "mean) vs k eta0+ u_fs (measured eta0+): Richtmyer's eta reaches zero "
                                             "after one inversion time 1/(k u_fs)")
+        # how well the comparison is posed: eta0+ = eta0 (1 - u_fs/D) turns a relative error of D into a
+        # relative error of eta0+ (and of the rate) u_fs / |D - u_fs| times as large; near u_fs = D
+        # (lead's disordered range in the CD model) the shock all but erases the perturbation
+        amp = u_w / abs(D - u_w) if (np.isfinite(u_w) and D != u_w) else math.inf
+        eta0p_h = A * (1.0 - u_w / info["D_table"])
+        notes.append(f"Richtmyer's eta0+ = eta0 (1 - u_fs/D) = {eta0p / A:.2f} eta0 amplifies a relative error of D "
+                     f"{amp:.1f}-fold (u_fs / |D - u_fs|); with the CD Hugoniot's D "
+                     f"({info['D_table'] / units.km_s:.3f} km/s) instead of the measured {D / units.km_s:.3f} km/s, "
+                     f"eta0+ = {eta0p_h / units.um:.3g} um")
         jet_from = "valleys" if (np.isfinite(eta_s[-1]) and eta_s[-1] < 0) else "crests"
         notes.append(f"the leading material at the end comes from the {jet_from} (eta, 5-frame mean, "
                      f"{'<' if jet_from == 'valleys' else '>'} 0): "
@@ -180,7 +189,9 @@ class JetsScene(ProfiledShockScene):
                  "richtmyer_window_us": [t_start / units.us, t_fit / units.us], "n_particles": sm["n"],
                  "n_steps": sm["nsteps"], "particle_steps": sm["n"] * sm["nsteps"], "stepping_time_s": sm["t_run"],
                  "u_drive_km_s": info["u"] / units.km_s, "r0_um": info["r0"] / units.um,
-                 "orientation": info["orientation"]}
+                 "orientation": info["orientation"], "richtmyer_u_fs_km_s": u_w / units.km_s,
+                 "richtmyer_D_km_s": D / units.km_s, "d_amplification": amp,
+                 "eta0_plus_hugoniot_um": eta0p_h / units.um}
         return q, notes, extra
 
     def report(self, v, summaries, result, out):

@@ -176,3 +176,6 @@ def test_jets_tiny_run():
     assert q["jet_ratio"].value > 1.0
     assert q["ordered_fraction"].value > 0.9                     # 30 GPa: the Al lattice stays ordered
     assert res.extra["regime"].startswith("ordered")
+    u, D = res.extra["richtmyer_u_fs_km_s"], res.extra["richtmyer_D_km_s"]
+    assert res.extra["d_amplification"] == pytest.approx(u / abs(D - u))       # how the comparison is posed
+    assert any("amplifies a relative error of D" in n for n in res.notes)
