@@ -159,7 +159,6 @@ def worker_run(a):
     print(f"[{a.run}] N = {n0}, dt = {dyn.dt / units.fs:.4g} fs, initial box {np.round(ext0 / r0, 1)} r0",
           flush=True)
     while True:
-        gc.collect()
         nb0, ns0 = nl.nbuilds, nl.nlocal
         n_start = len(atoms)
         t0, c0 = time.perf_counter(), time.process_time()

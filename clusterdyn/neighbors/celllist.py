@@ -734,8 +734,8 @@ def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, b
 
 
 @njit(cache=True, parallel=True)
-def _brick_displacements(pos_nc, ref_nc, brick_n, nb, acc_tb6, out_b6):
-    """Bounding box of the displacements ``pos - ref`` of each brick: (min xyz, max xyz)."""
+def _brick_centres(pos_nc, ref_nc, brick_n, nb, acc_tb6, mid_b3):
+    """Centre of the bounding box of the displacements ``pos - ref`` of each brick."""
     n = pos_nc.shape[0]
     nt = acc_tb6.shape[0]
     for t in prange(nt):
@@ -756,14 +756,13 @@ def _brick_displacements(pos_nc, ref_nc, brick_n, nb, acc_tb6, out_b6):
             for t in range(nt):
                 lo = min(lo, acc_tb6[t, b, d])
                 hi = max(hi, acc_tb6[t, b, 3 + d])
-            out_b6[b, d] = lo
-            out_b6[b, 3 + d] = hi
+            mid_b3[b, d] = 0.5 * (lo + hi)
 
 
 @njit(cache=True, parallel=True)
-def _brick_radii(pos_nc, ref_nc, brick_n, disp_b6, acc_tb2, out_b2):
+def _brick_radii(pos_nc, ref_nc, brick_n, mid_b3, acc_tb2, out_b2):
     """The two largest distances of a brick's displacements from the centre of its displacement
-    box (``disp_b6`` of :func:`_brick_displacements`): (largest, second largest) per brick.
+    box (``mid_b3`` of :func:`_brick_centres`): (largest, second largest) per brick.
 
     A sphere about the box's centre through the farthest displacement bounds them as the box's
     half-diagonal does, but tighter (up to sqrt 3 for thermal motion, whose extremes along x, y
@@ -772,7 +771,7 @@ def _brick_radii(pos_nc, ref_nc, brick_n, disp_b6, acc_tb2, out_b2):
     """
     n = pos_nc.shape[0]
     nt = acc_tb2.shape[0]
-    nb = disp_b6.shape[0]
+    nb = mid_b3.shape[0]
     for t in prange(nt):
         for b in range(nb):
             acc_tb2[t, b, 0] = 0.0
@@ -781,7 +780,7 @@ def _brick_radii(pos_nc, ref_nc, brick_n, disp_b6, acc_tb2, out_b2):
             b = brick_n[i]
             r2 = 0.0
             for d in range(3):
-                x = pos_nc[i, d] - ref_nc[i, d] - 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
+                x = pos_nc[i, d] - ref_nc[i, d] - mid_b3[b, d]
                 r2 += x * x
             if r2 != r2:
                 r2 = np.inf
@@ -806,18 +805,14 @@ def _brick_radii(pos_nc, ref_nc, brick_n, disp_b6, acc_tb2, out_b2):
 
 
 @njit(cache=True)
-def _bricks_safe(disp_b6, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
     """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b,
     |centre_a - centre_b| + R_a + R_b (the centres of their displacement boxes and the largest
     distances from them, :func:`_brick_radii`, bound any |d_i - d_j|; within one brick the two
     largest distances) is at most max(skin, S_ab - rc), S_ab the distance between their
     position boxes at the build (a pair not listed was at least cutoff + skin and at least
     S_ab apart)."""
-    nb = disp_b6.shape[0]
-    mid = np.empty((nb, 3))
-    for b in range(nb):
-        for d in range(3):
-            mid[b, d] = 0.5 * (disp_b6[b, d] + disp_b6[b, 3 + d])
+    nb = mid_b3.shape[0]
     for a in range(nb):
         if not rad_b2[a, 0] + rad_b2[a, 1] <= skin:
             return False
@@ -830,7 +825,7 @@ def _bricks_safe(disp_b6, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
                     g = min(g, max(0.0, blo_b3[a, d] + box_c[d] - bhi_b3[b, d]),
                             max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
                 s2 += g * g
-                c2 += (mid[a, d] - mid[b, d]) ** 2
+                c2 += (mid_b3[a, d] - mid_b3[b, d]) ** 2
             bound = math.sqrt(c2) + rad_b2[a, 0] + rad_b2[b, 0]
             if not bound <= max(skin, math.sqrt(s2) - rc):
                 return False
@@ -1002,10 +997,10 @@ class NeighborList:
         if m <= lim or h2 <= lim:
             return False
         if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
-            brick_n, blo, bhi, box, periodic_c, acc, disp, acc2, rad = self._bricks
-            _brick_displacements(pos, self.ref_nc, brick_n, blo.shape[0], acc, disp)
-            _brick_radii(pos, self.ref_nc, brick_n, disp, acc2, rad)
-            if _bricks_safe(disp, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
+            brick_n, blo, bhi, box, periodic_c, acc, mid, acc2, rad = self._bricks
+            _brick_centres(pos, self.ref_nc, brick_n, blo.shape[0], acc, mid)
+            _brick_radii(pos, self.ref_nc, brick_n, mid, acc2, rad)
+            if _bricks_safe(mid, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
                 self.nlocal += 1
                 return False
         return True
@@ -1104,7 +1099,7 @@ class NeighborList:
         if m < 2:
             return
         self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
-                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 6)), np.empty((BRICK_CHUNKS, m, 2)),
+                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 3)), np.empty((BRICK_CHUNKS, m, 2)),
                         np.empty((m, 2)))
 
     def _image_table(self, krange, box):

@@ -141,7 +141,10 @@ class JetsScene(ProfiledShockScene):
         w = (t >= t_start) & (t <= t_fit)
         u_w = float(np.nanmean(ufs[w])) if w.any() else math.nan
         slope, eta_c, ne = fit_rate(t, eta, t_start, t_fit)
-        eta0p = A * (1.0 - u_w / D)
+        def eta0_plus(shock_speed):          # Richtmyer's amplitude after the impulse
+            return A * (1.0 - u_w / shock_speed)
+
+        eta0p = eta0_plus(D)
         rich = k * eta0p * u_w
         q["eta0_plus"] = Quantity(eta_c / units.um, "um", eta0p / units.um,
                                   note=f"eta when the surface has reached {IMPULSE_OVER:g} of its final speed "
@@ -166,7 +169,7 @@ class JetsScene(ProfiledShockScene):
         # relative error of eta0+ (and of the rate) u_fs / |D - u_fs| times as large; near u_fs = D
         # (lead's disordered range in the CD model) the shock all but erases the perturbation
         amp = u_w / abs(D - u_w) if (np.isfinite(u_w) and D != u_w) else math.inf
-        eta0p_h = A * (1.0 - u_w / info["D_table"])
+        eta0p_h = eta0_plus(info["D_table"])
         notes.append(f"Richtmyer's eta0+ = eta0 (1 - u_fs/D) = {eta0p / A:.2f} eta0 amplifies a relative error of D "
                      f"{amp:.1f}-fold (u_fs / |D - u_fs|); with the CD Hugoniot's D "
                      f"({info['D_table'] / units.km_s:.3f} km/s) instead of the measured {D / units.km_s:.3f} km/s, "
