@@ -218,30 +218,32 @@ def _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes):
     return (k0 * ncell_c[a1] + k1) * ncell_c[a2] + k2
 
 
-@njit(inline="always")
-def _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc):
-    perm[k] = i
-    for d in range(3):
-        w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-        xs_nc[k, d] = w
-        offs_nc[k, d] = w - pos_nc[i, d]
+@njit(cache=True, parallel=True)
+def _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n):
+    """Cell key of every particle (:func:`_cell_key`), in parallel."""
+    for i in prange(pos_nc.shape[0]):
+        key_n[i] = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
+
+
+@njit(cache=True, parallel=True)
+def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc):
+    """Sorted wrapped positions and wrap offsets of the rows of ``perm``, in parallel."""
+    for k in prange(perm.shape[0]):
+        i = perm[k]
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            xs_nc[k, d] = w
+            offs_nc[k, d] = w - pos_nc[i, d]
 
 
 @njit(cache=True)
-def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
-    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
-    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
-    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
-    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
-    dense row starts ``start`` (ncell + 1)."""
-    n = pos_nc.shape[0]
-    ncell = ncell_c[0] * ncell_c[1] * ncell_c[2]
-    cell_n = np.empty(n, np.int64)
+def _count_sort(cell_n, ncell, perm):
+    """Stable counting sort of the keys ``cell_n`` (< ncell) into ``perm``; returns the occupied
+    cells ``(ukey, ustart)`` and the dense row starts (ncell + 1)."""
+    n = cell_n.shape[0]
     start = np.zeros(ncell + 1, np.int64)
     for i in range(n):
-        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
-        cell_n[i] = c
-        start[c + 1] += 1
+        start[cell_n[i] + 1] += 1
     m = 0
     for c in range(ncell):
         if start[c + 1] > 0:
@@ -250,9 +252,8 @@ def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, 
     fill = start[:-1].copy()
     for i in range(n):
         c = cell_n[i]
-        k = fill[c]
+        perm[fill[c]] = i
         fill[c] += 1
-        _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc)
     ukey = np.empty(m, np.int64)
     ustart = np.empty(m + 1, np.int64)
     q = 0
@@ -265,23 +266,33 @@ def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, 
     return ukey, ustart, start
 
 
+def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
+    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
+    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
+    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
+    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
+    dense row starts ``start`` (ncell + 1).  The keys and the gather run in parallel, the
+    counting in one thread."""
+    cell_n = np.empty(pos_nc.shape[0], np.int64)
+    _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, cell_n)
+    ukey, ustart, start = _count_sort(cell_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
+    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
+    return ukey, ustart, start
+
+
 #: bits per digit of the radix sort of sparse cell keys
 RADIX_BITS = 11
 
 
 @njit(cache=True)
-def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
-    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
-    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
-    n = pos_nc.shape[0]
-    key = np.empty(n, np.int64)
+def _radix_sort(key, perm):
+    """Stable LSD radix sort of the keys ``key`` (>= 0; used as scratch) into ``perm``; returns the occupied cells ``(ukey, ustart)``."""
+    n = key.shape[0]
     idx = np.empty(n, np.int64)
     kmax = 0
     for i in range(n):
-        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
-        key[i] = c
         idx[i] = i
-        kmax = max(kmax, c)
+        kmax = max(kmax, key[i])
     nbits = 0
     while nbits < 63 and (kmax >> nbits) > 0:
         nbits += 1
@@ -318,8 +329,18 @@ def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm,
             ukey[q] = key[k]
             ustart[q] = k
             q += 1
-        _put_sorted(pos_nc, idx[k], k, box_c, periodic_c, perm, xs_nc, offs_nc)
+        perm[k] = idx[k]
     ustart[m] = n
+    return ukey, ustart
+
+
+def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
+    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
+    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
+    key = np.empty(pos_nc.shape[0], np.int64)
+    _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key)
+    ukey, ustart = _radix_sort(key, perm)
+    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
     return ukey, ustart
 
 
@@ -693,25 +714,38 @@ MAX_BRICKS = 512
 BRICK_CHUNKS = 16
 
 
+@njit(cache=True, parallel=True)
+def _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n):
+    """Key of the cube of ``side`` (over the box, open axes from ``lo_c``) of every particle."""
+    inv = 1.0 / side
+    for i in prange(pos_nc.shape[0]):
+        key = 0
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
+            key = key * nb_c[d] + k
+        key_n[i] = key
+
+
 @njit(cache=True)
-def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3):
-    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
-    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
-    positions; returns the number of occupied bricks, or -1 beyond ``maxb``."""
-    n = pos_nc.shape[0]
+def _number_bricks(key_n, maxb, brick_n):
+    """Each particle's brick, numbered in order of first appearance, into ``brick_n``; returns the
+    number of bricks, or -1 beyond ``maxb``.  A particle in its predecessor's brick (most, in a
+    sample built lattice by lattice) skips the hash table."""
+    n = key_n.shape[0]
     h = 4
     while h < 4 * maxb:
         h *= 2
     hkey = np.full(h, -1, np.int64)
     hval = np.empty(h, np.int64)
     m = 0
-    inv = 1.0 / side
+    last = -1
+    lastb = 0
     for i in range(n):
-        key = 0
-        for d in range(3):
-            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
-            key = key * nb_c[d] + k
+        key = key_n[i]
+        if key == last:
+            brick_n[i] = lastb
+            continue
         s = int((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)) & (h - 1)   # Fibonacci hashing
         while hkey[s] != -1 and hkey[s] != key:
             s = (s + 1) & (h - 1)
@@ -720,16 +754,52 @@ def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, b
                 return -1
             hkey[s] = key
             hval[s] = m
-            for d in range(3):
-                blo_b3[m, d] = np.inf
-                bhi_b3[m, d] = -np.inf
             m += 1
-        b = hval[s]
-        brick_n[i] = b
+        last = key
+        lastb = hval[s]
+        brick_n[i] = lastb
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, blo_b3, bhi_b3):
+    """Bounding box of the wrapped positions of each brick (fixed particle chunks, then their
+    reduction: the result does not depend on the thread count)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    nb = blo_b3.shape[0]
+    for t in prange(nt):
+        for b in range(nb):
+            for d in range(3):
+                acc_tb6[t, b, d] = np.inf
+                acc_tb6[t, b, 3 + d] = -np.inf
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            b = brick_n[i]
+            for d in range(3):
+                w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], w)
+                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], w)
+    for b in range(nb):
         for d in range(3):
-            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            blo_b3[b, d] = min(blo_b3[b, d], w)
-            bhi_b3[b, d] = max(bhi_b3[b, d], w)
+            lo = np.inf
+            hi = -np.inf
+            for t in range(nt):
+                lo = min(lo, acc_tb6[t, b, d])
+                hi = max(hi, acc_tb6[t, b, 3 + d])
+            blo_b3[b, d] = lo
+            bhi_b3[b, d] = hi
+
+
+def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3):
+    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
+    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
+    positions into ``blo_b3[:m]``, ``bhi_b3[:m]``; returns the number m of occupied bricks, or -1
+    beyond ``maxb``.  The keys and the boxes in parallel, the numbering in one thread."""
+    key_n = np.empty(pos_nc.shape[0], np.int64)
+    _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n)
+    m = _number_bricks(key_n, maxb, brick_n)
+    if m > 0:
+        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m], bhi_b3[:m])
     return m
 
 
