@@ -243,8 +243,11 @@ class ClusterDynamics(Calculator):
         nl = self.nl
         lay = self._buffers
         if lay is None or lay["n"] != n:
-            lay = {"n": n, "key": None, "vs": None, "f_m3": np.empty((0, 3)),
-                   "e_m1": self._NO_PP1, "w_m6": self._NO_PP6}
+            # a new particle count (particles removed): the pair-slot buffers and the velocities'
+            # store are kept (they grow, never shrink), so a removal allocates nothing of N's size
+            old = lay or {"f_m3": np.empty((0, 3)), "e_m1": self._NO_PP1, "w_m6": self._NO_PP6, "vs_store": None}
+            lay = {"n": n, "key": None, "vs": None, "f_m3": old["f_m3"], "e_m1": old["e_m1"], "w_m6": old["w_m6"],
+                   "vs_store": old["vs_store"]}
             self._buffers = lay
         if lay["key"] != nl.nbuilds:
             nk = max(1, n // K.CHUNK_ROWS)
@@ -263,7 +266,9 @@ class ClusterDynamics(Calculator):
             lay["e_m1"] = np.empty((m, 1))
             lay["w_m6"] = np.empty((m, 6))
         if damped and lay["vs"] is None:
-            lay["vs"] = np.empty((n, 3))
+            if lay["vs_store"] is None or lay["vs_store"].shape[0] < n:
+                lay["vs_store"] = np.empty((n, 3))
+            lay["vs"] = lay["vs_store"][:n]
         return lay
 
     _NO_PP1 = np.zeros((0, 1))

@@ -128,6 +128,25 @@ class RegionOfInterest:
         return f"RegionOfInterest(lo={self.lo.tolist()}, hi={self.hi.tolist()})"
 
 
+#: rows moved at a time by :func:`_compact`
+COMPACT_ROWS = 65536
+
+
+def _compact(a, keep):
+    """The rows ``keep`` (ascending) of ``a``, moved to its front in place: a view of its first
+    ``len(keep)`` rows.  Nothing of the array's size is allocated (rows are moved a block at a
+    time; row keep[t] >= t, so a block reads only rows no earlier block has written), which keeps
+    removing particles from raising the peak memory; the memory of the removed rows is not given
+    back (the Atoms' arrays keep their size at the start of the run)."""
+    k = keep.size
+    if not a.flags.c_contiguous:
+        return np.ascontiguousarray(a[keep])
+    for s in range(0, k, COMPACT_ROWS):
+        e = min(s + COMPACT_ROWS, k)
+        a[s:e] = a[keep[s:e]]
+    return a[:k]
+
+
 class DampedVerlet(MolecularDynamics):
     """Velocity Verlet for clusters, with optional pair damping (CD eq. 5-6).
 
@@ -296,12 +315,13 @@ class DampedVerlet(MolecularDynamics):
             damping = None
             if self._eta is not None:
                 damping = (atoms.arrays["momenta"], self._invm_n, self._eta)
-            # two force buffers taking turns: the forces of the previous step stay valid
+            # two force buffers taking turns: the forces of the previous step stay valid (they grow,
+            # never shrink: removing particles takes views of them)
             n = len(atoms)
-            if self._fbuf is None or self._fbuf[0].shape[0] != n:
+            if self._fbuf is None or self._fbuf[0].shape[0] < n:
                 self._fbuf = [np.empty((n, 3)), np.empty((n, 3))]
             self._fturn ^= 1
-            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn],
+            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn][:n],
                                     virial=False, energy=False,
                                     kick=None if kick is None else (atoms.arrays["momenta"], kick))
             forces = out["forces"]
@@ -476,12 +496,11 @@ class DampedVerlet(MolecularDynamics):
         for c in cons:
             c.index_shuffle(atoms, keep)
         for name in list(atoms.arrays):
-            atoms.arrays[name] = np.ascontiguousarray(atoms.arrays[name][keep])
+            atoms.arrays[name] = _compact(atoms.arrays[name], keep)
         atoms.set_constraint(cons)
         if atoms.calc is not None and hasattr(atoms.calc, "reset"):
             atoms.calc.reset()
         self.masses = atoms.get_masses()[:, None]
-        self._fbuf = None
         self._invm_n = self._invm()
         self._epot = None
         self.forces = self._compute_forces()

@@ -218,30 +218,32 @@ def _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes):
     return (k0 * ncell_c[a1] + k1) * ncell_c[a2] + k2
 
 
-@njit(inline="always")
-def _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc):
-    perm[k] = i
-    for d in range(3):
-        w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-        xs_nc[k, d] = w
-        offs_nc[k, d] = w - pos_nc[i, d]
+@njit(cache=True, parallel=True)
+def _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n):
+    """Cell key of every particle (:func:`_cell_key`), in parallel."""
+    for i in prange(pos_nc.shape[0]):
+        key_n[i] = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
+
+
+@njit(cache=True, parallel=True)
+def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc):
+    """Sorted wrapped positions and wrap offsets of the rows of ``perm``, in parallel."""
+    for k in prange(perm.shape[0]):
+        i = perm[k]
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            xs_nc[k, d] = w
+            offs_nc[k, d] = w - pos_nc[i, d]
 
 
 @njit(cache=True)
-def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
-    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
-    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
-    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
-    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
-    dense row starts ``start`` (ncell + 1)."""
-    n = pos_nc.shape[0]
-    ncell = ncell_c[0] * ncell_c[1] * ncell_c[2]
-    cell_n = np.empty(n, np.int64)
+def _count_sort(cell_n, ncell, perm):
+    """Stable counting sort of the keys ``cell_n`` (< ncell) into ``perm``; returns the occupied
+    cells ``(ukey, ustart)`` and the dense row starts (ncell + 1)."""
+    n = cell_n.shape[0]
     start = np.zeros(ncell + 1, np.int64)
     for i in range(n):
-        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
-        cell_n[i] = c
-        start[c + 1] += 1
+        start[cell_n[i] + 1] += 1
     m = 0
     for c in range(ncell):
         if start[c + 1] > 0:
@@ -250,9 +252,8 @@ def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, 
     fill = start[:-1].copy()
     for i in range(n):
         c = cell_n[i]
-        k = fill[c]
+        perm[fill[c]] = i
         fill[c] += 1
-        _put_sorted(pos_nc, i, k, box_c, periodic_c, perm, xs_nc, offs_nc)
     ukey = np.empty(m, np.int64)
     ustart = np.empty(m + 1, np.int64)
     q = 0
@@ -265,23 +266,32 @@ def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, 
     return ukey, ustart, start
 
 
+def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n):
+    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
+    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
+    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
+    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
+    dense row starts ``start`` (ncell + 1).  The keys and the gather run in parallel, the
+    counting in one thread.  ``key_n``: scratch of N int64."""
+    _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
+    ukey, ustart, start = _count_sort(key_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
+    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
+    return ukey, ustart, start
+
+
 #: bits per digit of the radix sort of sparse cell keys
 RADIX_BITS = 11
 
 
 @njit(cache=True)
-def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc):
-    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
-    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
-    n = pos_nc.shape[0]
-    key = np.empty(n, np.int64)
+def _radix_sort(key, perm):
+    """Stable LSD radix sort of the keys ``key`` (>= 0; used as scratch) into ``perm``; returns the occupied cells ``(ukey, ustart)``."""
+    n = key.shape[0]
     idx = np.empty(n, np.int64)
     kmax = 0
     for i in range(n):
-        c = _cell_key(pos_nc, i, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes)
-        key[i] = c
         idx[i] = i
-        kmax = max(kmax, c)
+        kmax = max(kmax, key[i])
     nbits = 0
     while nbits < 63 and (kmax >> nbits) > 0:
         nbits += 1
@@ -318,8 +328,17 @@ def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm,
             ukey[q] = key[k]
             ustart[q] = k
             q += 1
-        _put_sorted(pos_nc, idx[k], k, box_c, periodic_c, perm, xs_nc, offs_nc)
+        perm[k] = idx[k]
     ustart[m] = n
+    return ukey, ustart
+
+
+def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n):
+    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
+    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
+    _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
+    ukey, ustart = _radix_sort(key_n, perm)
+    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
     return ukey, ustart
 
 
@@ -693,25 +712,38 @@ MAX_BRICKS = 512
 BRICK_CHUNKS = 16
 
 
+@njit(cache=True, parallel=True)
+def _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n):
+    """Key of the cube of ``side`` (over the box, open axes from ``lo_c``) of every particle."""
+    inv = 1.0 / side
+    for i in prange(pos_nc.shape[0]):
+        key = 0
+        for d in range(3):
+            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
+            key = key * nb_c[d] + k
+        key_n[i] = key
+
+
 @njit(cache=True)
-def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3):
-    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
-    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
-    positions; returns the number of occupied bricks, or -1 beyond ``maxb``."""
-    n = pos_nc.shape[0]
+def _number_bricks(key_n, maxb, brick_n):
+    """Each particle's brick, numbered in order of first appearance, into ``brick_n``; returns the
+    number of bricks, or -1 beyond ``maxb``.  A particle in its predecessor's brick (most, in a
+    sample built lattice by lattice) skips the hash table."""
+    n = key_n.shape[0]
     h = 4
     while h < 4 * maxb:
         h *= 2
     hkey = np.full(h, -1, np.int64)
     hval = np.empty(h, np.int64)
     m = 0
-    inv = 1.0 / side
+    last = -1
+    lastb = 0
     for i in range(n):
-        key = 0
-        for d in range(3):
-            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
-            key = key * nb_c[d] + k
+        key = key_n[i]
+        if key == last:
+            brick_n[i] = lastb
+            continue
         s = int((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)) & (h - 1)   # Fibonacci hashing
         while hkey[s] != -1 and hkey[s] != key:
             s = (s + 1) & (h - 1)
@@ -720,16 +752,52 @@ def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, b
                 return -1
             hkey[s] = key
             hval[s] = m
-            for d in range(3):
-                blo_b3[m, d] = np.inf
-                bhi_b3[m, d] = -np.inf
             m += 1
-        b = hval[s]
-        brick_n[i] = b
+        last = key
+        lastb = hval[s]
+        brick_n[i] = lastb
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, blo_b3, bhi_b3):
+    """Bounding box of the wrapped positions of each brick (fixed particle chunks, then their
+    reduction: the result does not depend on the thread count)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    nb = blo_b3.shape[0]
+    for t in prange(nt):
+        for b in range(nb):
+            for d in range(3):
+                acc_tb6[t, b, d] = np.inf
+                acc_tb6[t, b, 3 + d] = -np.inf
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            b = brick_n[i]
+            for d in range(3):
+                w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], w)
+                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], w)
+    for b in range(nb):
         for d in range(3):
-            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            blo_b3[b, d] = min(blo_b3[b, d], w)
-            bhi_b3[b, d] = max(bhi_b3[b, d], w)
+            lo = np.inf
+            hi = -np.inf
+            for t in range(nt):
+                lo = min(lo, acc_tb6[t, b, d])
+                hi = max(hi, acc_tb6[t, b, 3 + d])
+            blo_b3[b, d] = lo
+            bhi_b3[b, d] = hi
+
+
+def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3, key_n):
+    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
+    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
+    positions into ``blo_b3[:m]``, ``bhi_b3[:m]``; returns the number m of occupied bricks, or -1
+    beyond ``maxb``.  The keys (into the scratch ``key_n``) and the boxes in parallel, the
+    numbering in one thread."""
+    _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n)
+    m = _number_bricks(key_n, maxb, brick_n)
+    if m > 0:
+        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m], bhi_b3[:m])
     return m
 
 
@@ -945,6 +1013,9 @@ class NeighborList:
         self.cells = cells
         self.nbuilds = 0
         self.ref_nc = None
+        self._ref_store = None          # buffers behind ref_nc and the sorted rows' arrays (grow only)
+        self._store = None
+        self._key_store = None
         self.perm_n = None
         self.jp_p = None
         self.img_shift = 0
@@ -1062,10 +1133,10 @@ class NeighborList:
             self._build_unsorted(pos, *geo)
         if self.centered:
             self._set_bricks(pos, geo)
-        if self.ref_nc is not None and self.ref_nc.shape == pos.shape:
-            np.copyto(self.ref_nc, pos)
-        else:
-            self.ref_nc = pos.copy()
+        if self._ref_store is None or self._ref_store.shape[0] < pos.shape[0]:
+            self._ref_store = np.empty_like(pos)
+        self.ref_nc = self._ref_store[:pos.shape[0]]
+        np.copyto(self.ref_nc, pos)
         self._key = _box_key(cell, pbc)
         self.nbuilds += 1
 
@@ -1091,7 +1162,8 @@ class NeighborList:
         while True:
             nb_c = np.array([max(1, int(min(math.floor(ext[d] / side), 2 ** 20)) + 1) for d in range(3)], np.int64)
             if float(np.prod(nb_c.astype(float))) < 2.0 ** 62:
-                m = _assign_bricks(pos, boxw, periodic_c, lo, side, nb_c, MAX_BRICKS, brick_n, blo, bhi)
+                m = _assign_bricks(pos, boxw, periodic_c, lo, side, nb_c, MAX_BRICKS, brick_n, blo, bhi,
+                                   self._keys(n))
                 if m > 0:
                     break
             side *= 2.0
@@ -1142,12 +1214,23 @@ class NeighborList:
         self._offset_nc = wpos - pos
         self.last_cells = "coarse"
 
+    def _keys(self, n):
+        """Scratch of n int64 (the cell and brick keys of a build), kept across builds (grows only):
+        allocating it per build fragments the heap (about 80 bytes per particle held after a few
+        hundred builds)."""
+        if self._key_store is None or self._key_store.shape[0] < n:
+            self._key_store = np.empty(n, np.int64)
+        return self._key_store[:n]
+
     def _sorted_buffers(self, n):
-        if self.xs_nc is None or self.xs_nc.shape[0] != n:
-            self.xs_nc = np.empty((n, 3))
-            self.offs_nc = np.empty((n, 3))
-            self.perm_n = np.empty(n, np.int64)
-            self.first_n = np.zeros(n + 1, np.int64)
+        """The sorted rows' arrays for n particles: views of buffers kept across builds, which
+        grow but never shrink, so that removing particles allocates nothing (every build writes
+        every row of them)."""
+        st = self._store
+        if st is None or st[0].shape[0] < n:
+            st = self._store = (np.empty((n, 3)), np.empty((n, 3)), np.empty(n, np.int64),
+                                np.zeros(n + 1, np.int64))
+        self.xs_nc, self.offs_nc, self.perm_n, self.first_n = st[0][:n], st[1][:n], st[2][:n], st[3][:n + 1]
         return self.perm_n, self.xs_nc, self.offs_nc
 
     def _build_sorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
@@ -1171,10 +1254,12 @@ class NeighborList:
         sparse = (self.cells == "sparse"
                   or (self.cells == "auto" and dense_cells > DENSE_CELLS_PER_PARTICLE * max(n, 1) + 27))
         if sparse:
-            ukey, ustart = _sort_sparse(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+            ukey, ustart = _sort_sparse(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+                                        self._keys(n))
             dstart = np.empty(0, np.int64)
         else:
-            ukey, ustart, dstart = _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+            ukey, ustart, dstart = _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+                                               self._keys(n))
         if n >= 2 ** HALF_SHIFT:
             raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
         nslot = ncell[axes]
@@ -1227,7 +1312,7 @@ class NeighborList:
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
         cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs)
+        _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self._keys(n))
         first_n = self.first_n
         first_n[:] = 0
         # _search decodes cells with x slowest: re-bin the sorted rows that way
@@ -1284,8 +1369,9 @@ class NeighborList:
 
     def memory_bytes(self):
         """Bytes of the arrays the list keeps between builds (list, permutation, buffers)."""
-        arrs = [self.ref_nc, self.perm_n, self.xs_nc, self.offs_nc, self.first_n, self._pool,
-                self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
+        arrs = [self._ref_store, self._pool, self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
+        arrs += list(self._store) if self._store is not None else [self.first_n]
+        arrs.append(self._key_store)
         if self._bricks is not None:
             arrs += [a for a in self._bricks if isinstance(a, np.ndarray)]
         return int(sum(a.nbytes for a in arrs if a is not None))

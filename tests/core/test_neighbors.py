@@ -202,3 +202,45 @@ def test_local_rebuild_test_bounds_by_the_farthest_displacements_and_misses_no_p
             want = {tuple(q) for q in cKDTree(pos).query_pairs(rc - 1e-9)}
             assert want <= _listed_pairs(nl, pos, rc)
     assert kept > 30 and nl.nbuilds > 2
+
+
+@pytest.mark.parametrize("cells", ["dense", "sparse"])
+def test_parallel_sort_and_bricks_are_the_serial_ones(cells):
+    """The cell sort and the bricks (keys, gather and brick boxes in parallel) on 1 and 2 threads:
+    the same rows, list and bricks; rows stable within a cell (a cell's particles in their
+    original order); each brick's box the bounding box of its particles, bricks numbered in
+    order of first appearance."""
+    from clusterdyn.parallel import MIN_PARTICLES_PER_THREAD, set_max_threads
+    rng = np.random.default_rng(3)
+    n = 4 * MIN_PARTICLES_PER_THREAD
+    pos = np.vstack([rng.uniform(0, 30.0, (n // 2, 3)), rng.normal(15.0, 60.0, (n // 2, 3))])
+    pos = pos[rng.permutation(len(pos))]
+    got = []
+    try:
+        for threads in (1, 2):
+            set_max_threads(min(threads, __import__("numba").config.NUMBA_NUM_THREADS))
+            nl = NeighborList(1.1, 0.3, half=True, sort=True, centered=True, cells=cells)
+            nl.build(pos, np.zeros((3, 3)), False)
+            brick_n, blo, bhi = nl._bricks[:3]
+            got.append([nl.perm_n.copy(), nl.first_n.copy(), nl.jp_p.copy(), nl.xs_nc.copy(), brick_n.copy(),
+                        blo.copy(), bhi.copy()])
+    finally:
+        set_max_threads(None)
+    assert nl.last_cells == cells
+    assert all(np.array_equal(a, b) for a, b in zip(*got))
+    perm, xs, brick_n, blo, bhi = got[0][0], got[0][3], got[0][4], got[0][5], got[0][6]
+    assert np.array_equal(np.sort(perm), np.arange(len(pos))) and np.array_equal(xs, pos[perm])
+    # rows of one cell in the particles' order (the list's grid over an open box: floor(extent /
+    # (cutoff + skin)) cells a side)
+    ext = np.ptp(pos, axis=0)
+    ncell = np.floor(ext / (nl.cutoff + nl.skin))
+    cell = np.minimum(np.floor((xs - pos.min(axis=0)) * (1.0 / (ext / ncell))), ncell - 1).astype(np.int64)
+    new = np.r_[True, np.any(cell[1:] != cell[:-1], axis=1)]
+    run = np.cumsum(new)
+    same = run[1:] == run[:-1]
+    assert same.sum() > len(pos) // 4 and np.all(perm[1:][same] > perm[:-1][same])
+    first = np.unique(brick_n, return_index=True)[1]
+    assert np.array_equal(np.sort(first), first)           # numbered in order of first appearance
+    for b in range(blo.shape[0]):
+        p = pos[brick_n == b]
+        assert np.array_equal(blo[b], p.min(axis=0)) and np.array_equal(bhi[b], p.max(axis=0))

@@ -134,3 +134,37 @@ def test_region_refused_along_periodic_axes():
         DampedVerlet(atoms, J=None, region=RegionOfInterest(hi=[np.inf, 1e6, np.inf]))
     with pytest.raises(InputError, match="hi"):
         RegionOfInterest(lo=[0, 0, 0], hi=[1, -1, 1])
+
+
+def test_removal_moves_rows_in_place_and_allocates_no_new_arrays():
+    """A removal keeps the Atoms' arrays, the list's buffers and the force buffers (the kept rows
+    moved to the front of the same memory: nothing of N's size is allocated, so removing does not
+    raise the peak memory) and gives the same particles and forces as the kept rows themselves."""
+    from clusterdyn.md.damped import COMPACT_ROWS, _compact
+    atoms, out = _block()
+    region = RegionOfInterest(hi=[atoms.positions[:, 0].max() + 3 * R0, np.inf, np.inf])
+    atoms.calc.setup(atoms)
+    dyn = DampedVerlet(atoms, timestep=default_timestep(atoms.calc, 9 * units.km_s), J=None, region=region,
+                       remove_interval=1000)
+    dyn.run(400)                                 # the thrown layer is outside now
+    before = {k: v for k, v in atoms.arrays.items()}
+    copies = {k: v.copy() for k, v in atoms.arrays.items()}
+    nl = atoms.calc.nl
+    stores = [nl._store[0], nl._ref_store, dyn._fbuf[0], dyn._fbuf[1]]
+    inside = region.inside(atoms.positions)
+    assert 0 < (~inside).sum() <= len(out)
+    assert dyn.remove_outside() == (~inside).sum()
+    keep = np.flatnonzero(inside)
+    for k, v in atoms.arrays.items():
+        assert np.shares_memory(v, before[k]) and np.array_equal(v, copies[k][keep]), k
+    assert all(np.shares_memory(a, b) for a, b in zip(stores, [nl.xs_nc, nl.ref_nc, *dyn._fbuf]))
+    assert nl.xs_nc.shape[0] == len(atoms) == keep.size
+    ref = atoms.copy()
+    ref.calc = ClusterDynamics()
+    assert np.allclose(dyn.forces, ref.get_forces(), rtol=1e-12, atol=1e-12 * np.abs(dyn.forces).max())
+    # blocks of rows: the same rows as one fancy index, across block edges
+    a = np.arange(3 * COMPACT_ROWS + 7, dtype=float).reshape(-1, 1) * [1.0, 2.0, 3.0]
+    k = np.flatnonzero(np.random.default_rng(1).random(a.shape[0]) < 0.6)
+    want = a[k].copy()
+    got = _compact(a, k)
+    assert np.shares_memory(got, a) and np.array_equal(got, want)
