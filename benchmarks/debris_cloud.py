@@ -180,7 +180,7 @@ def worker_run(a):
         trim()
         reset_peak()
         s = slab_rate(a, slab_state)
-        row = {"run": a.run, "chunk": chunk, "step": dyn.nsteps, "time_ns": dyn.get_time() / (1e3 * units.fs),
+        row = {"run": a.run, "chunk": chunk, "step": dyn.nsteps, "time_ns": dyn.get_time() / (1e6 * units.fs),
                "N": n, "removed": dyn.removed["count"], "wall_s": wall, "cpu_s": cpu,
                "rate_wall": nmean * a.chunk / wall, "rate_cpu": nmean * a.chunk / cpu,
                "builds": nl.nbuilds - nb0, "saved_by_local_test": nl.nlocal - ns0, "cells": nl.last_cells,
@@ -214,7 +214,7 @@ def markdown(a):
          "per second from the process' CPU time (the wall-clock figures, which include time spent waiting for "
          "a core on the shared machine, are in the CSV).", ""]
     for run in ("keep", "remove"):
-        p = RESULTS / f"debris_cloud_{run}.csv"
+        p = Path(a.out).parent / f"debris_cloud_{run}.csv"
         if not p.exists():
             continue
         rows = list(csv.DictReader(open(p)))
@@ -257,12 +257,15 @@ def main(argv=None):
                     help="shocked fraction of the slab reference state (0: after its first 100 steps)")
     ap.add_argument("--runs", default="keep,remove")
     ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--report", action="store_true", help="only write the table and plot of the CSVs in --out's folder")
     ap.add_argument("--out", default=str(RESULTS / "debris_cloud"))
     a = ap.parse_args(argv)
     if a.worker == "slab":
         return worker_slab(a)
     if a.worker == "run":
         return worker_run(a)
+    if a.report:
+        return report(a)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     procs = []
     for run in a.runs.split(","):          # the two runs side by side, each on one thread
@@ -275,8 +278,43 @@ def main(argv=None):
         procs.append(subprocess.Popen(cmd))
     if any(p.wait() != 0 for p in procs):
         raise RuntimeError("a debris run failed")
+    report(a)
+
+
+def plot(a):
+    """Rates over the run (debris and slab, CPU time) and the box's growth: ``<out>.png``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    for run, c in (("keep", "C0"), ("remove", "C1")):
+        p = Path(a.out).parent / f"debris_cloud_{run}.csv"
+        if not p.exists():
+            continue
+        rows = list(csv.DictReader(open(p)))
+        if not rows:
+            continue
+        t = [float(r["time_ns"]) for r in rows]
+        ax.plot(t, [float(r["rate_cpu"]) for r in rows], "o-", color=c, label=f"debris cloud ({run})")
+        ax.plot(t, [float(r["slab_rate_cpu"]) for r in rows], "s--", color=c, alpha=0.6,
+                label=f"slab of the initial N (after each {run} chunk)")
+        ax2.plot(t, [float(r["largest_side_growth"]) for r in rows], "o-", color=c, label=f"box growth ({run})")
+    ax.set_ylabel("particle-steps / s (CPU)")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8)
+    ax2.set_ylabel("largest side / initial")
+    ax2.set_xlabel("time (ns)")
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(Path(a.out).with_suffix(".png"), dpi=110)
+    plt.close(fig)
+
+
+def report(a):
+    """The markdown table and the plot of both runs' CSVs (also on their own: ``--report``)."""
     md = markdown(a)
     Path(a.out).with_suffix(".md").write_text(md)
+    plot(a)
     print(md)
 
 
