@@ -93,6 +93,17 @@ def build(a, region):
     return atoms, dyn
 
 
+def add_scene_args(ap, sphere, thickness, radius):
+    """The scene's options (also ``debris_lammps.py``'s), with the given sizes as defaults."""
+    ap.add_argument("--sphere", type=float, default=sphere, help="sphere diameter, r0")
+    ap.add_argument("--plate-thickness", type=float, default=thickness, help="r0")
+    ap.add_argument("--plate-radius", type=float, default=radius, help="r0")
+    ap.add_argument("--r0", type=float, default=5.0, help="um")
+    ap.add_argument("--v", type=float, default=6.7, help="km/s")
+    ap.add_argument("--J", default="50")
+    ap.add_argument("--dt-factor", type=float, default=0.1)
+
+
 def worker_slab(a):
     """The slab reference: ``--slab-steps`` steps of the saved shock state of the same N, one thread."""
     from _states import load_state
@@ -205,6 +216,12 @@ def worker_run(a):
             break
 
 
+def _rows(a, run):
+    """The rows of a run's CSV in ``--out``'s folder ([] if there is none)."""
+    p = Path(a.out).parent / f"debris_cloud_{run}.csv"
+    return list(csv.DictReader(open(p))) if p.exists() else []
+
+
 def markdown(a):
     L = ["# Debris cloud: sphere through a plate", "",
          f"Al sphere {a.sphere:g} r0 at {a.v:g} km/s through an Al plate {a.plate_thickness:g} x "
@@ -214,10 +231,7 @@ def markdown(a):
          "per second from the process' CPU time (the wall-clock figures, which include time spent waiting for "
          "a core on the shared machine, are in the CSV).", ""]
     for run in ("keep", "remove"):
-        p = Path(a.out).parent / f"debris_cloud_{run}.csv"
-        if not p.exists():
-            continue
-        rows = list(csv.DictReader(open(p)))
+        rows = _rows(a, run)
         if not rows:
             continue
         L += [f"## {run}", "", "| step | t (ns) | N | box growth (largest side / volume) | cells | pairs per particle | "
@@ -240,13 +254,7 @@ def main(argv=None):
     ap.add_argument("--worker", choices=["run", "slab"])
     ap.add_argument("--run", choices=["keep", "remove"], default="keep")
     ap.add_argument("--state")
-    ap.add_argument("--sphere", type=float, default=104.0, help="sphere diameter, r0")
-    ap.add_argument("--plate-thickness", type=float, default=12.0, help="r0")
-    ap.add_argument("--plate-radius", type=float, default=70.0, help="r0")
-    ap.add_argument("--r0", type=float, default=5.0, help="um")
-    ap.add_argument("--v", type=float, default=6.7, help="km/s")
-    ap.add_argument("--J", default="50")
-    ap.add_argument("--dt-factor", type=float, default=0.1)
+    add_scene_args(ap, 104.0, 12.0, 70.0)
     ap.add_argument("--growth", type=float, default=10.0)
     ap.add_argument("--chunk", type=int, default=1000)
     ap.add_argument("--max-steps", type=int, default=200000)
@@ -288,10 +296,7 @@ def plot(a):
     import matplotlib.pyplot as plt
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     for run, c in (("keep", "C0"), ("remove", "C1")):
-        p = Path(a.out).parent / f"debris_cloud_{run}.csv"
-        if not p.exists():
-            continue
-        rows = list(csv.DictReader(open(p)))
+        rows = _rows(a, run)
         if not rows:
             continue
         t = [float(r["time_ns"]) for r in rows]

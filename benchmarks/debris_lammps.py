@@ -42,6 +42,7 @@ RESULTS = HERE / "results"
 
 import lammps_tune as lt  # noqa: E402  (benchmarks/ on the path)
 from _states import STATES, shock_state  # noqa: E402
+from debris_cloud import add_scene_args, build  # noqa: E402
 
 
 def debris_state(a, step):
@@ -49,7 +50,6 @@ def debris_state(a, step):
     state with the damping off (the undamped windows' start)."""
     from clusterdyn.io.checkpoint import load_run, save_run
     from clusterdyn.md import DampedVerlet
-    from debris_cloud import build
     path = STATES / (f"debris_al_s{a.sphere:g}_p{a.plate_thickness:g}x{a.plate_radius:g}_J{a.J}"
                      f"_dt{a.dt_factor:g}_step{step}.h5")
     off = path.with_name(path.stem + "_off.h5")
@@ -114,13 +114,7 @@ def tune_debris(state, state_off, a, tmp, log):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sphere", type=float, default=50.0, help="sphere diameter, r0")
-    ap.add_argument("--plate-thickness", type=float, default=6.0, help="r0")
-    ap.add_argument("--plate-radius", type=float, default=35.0, help="r0")
-    ap.add_argument("--r0", type=float, default=5.0, help="um")
-    ap.add_argument("--v", type=float, default=6.7, help="km/s")
-    ap.add_argument("--J", default="50")
-    ap.add_argument("--dt-factor", type=float, default=0.1)
+    add_scene_args(ap, 50.0, 6.0, 35.0)
     ap.add_argument("--at", default="400,1200", help="debris steps at which the timed windows start")
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--repeat", type=int, default=2)

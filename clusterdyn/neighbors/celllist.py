@@ -760,12 +760,14 @@ def _number_bricks(key_n, maxb, brick_n):
 
 
 @njit(cache=True, parallel=True)
-def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, blo_b3, bhi_b3):
-    """Bounding box of the wrapped positions of each brick (fixed particle chunks, then their
-    reduction: the result does not depend on the thread count)."""
+def _brick_bounds(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, lo_b3, hi_b3):
+    """Per brick, the bounding box of its particles' wrapped positions (``ref_nc`` with no rows)
+    or of their displacements ``pos - ref`` (fixed particle chunks, then their reduction: the
+    result does not depend on the thread count)."""
     n = pos_nc.shape[0]
     nt = acc_tb6.shape[0]
-    nb = blo_b3.shape[0]
+    nb = lo_b3.shape[0]
+    disp = ref_nc.shape[0] > 0
     for t in prange(nt):
         for b in range(nb):
             for d in range(3):
@@ -774,9 +776,9 @@ def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, blo_b3, bhi_b3):
         for i in range(t * n // nt, (t + 1) * n // nt):
             b = brick_n[i]
             for d in range(3):
-                w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], w)
-                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], w)
+                x = pos_nc[i, d] - ref_nc[i, d] if disp else _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
+                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
+                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
     for b in range(nb):
         for d in range(3):
             lo = np.inf
@@ -784,8 +786,12 @@ def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, blo_b3, bhi_b3):
             for t in range(nt):
                 lo = min(lo, acc_tb6[t, b, d])
                 hi = max(hi, acc_tb6[t, b, 3 + d])
-            blo_b3[b, d] = lo
-            bhi_b3[b, d] = hi
+            lo_b3[b, d] = lo
+            hi_b3[b, d] = hi
+
+
+#: ``ref_nc`` of :func:`_brick_bounds` for the boxes of the positions themselves
+_NO_REF = np.zeros((0, 3))
 
 
 def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3, key_n):
@@ -797,34 +803,17 @@ def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, b
     _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n)
     m = _number_bricks(key_n, maxb, brick_n)
     if m > 0:
-        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m], bhi_b3[:m])
+        _brick_bounds(pos_nc, _NO_REF, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m],
+                      bhi_b3[:m])
     return m
 
 
-@njit(cache=True, parallel=True)
-def _brick_centres(pos_nc, ref_nc, brick_n, nb, acc_tb6, mid_b3):
-    """Centre of the bounding box of the displacements ``pos - ref`` of each brick."""
-    n = pos_nc.shape[0]
-    nt = acc_tb6.shape[0]
-    for t in prange(nt):
-        for b in range(nb):
-            for d in range(3):
-                acc_tb6[t, b, d] = np.inf
-                acc_tb6[t, b, 3 + d] = -np.inf
-        for i in range(t * n // nt, (t + 1) * n // nt):
-            b = brick_n[i]
-            for d in range(3):
-                x = pos_nc[i, d] - ref_nc[i, d]
-                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
-                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
-    for b in range(nb):
-        for d in range(3):
-            lo = np.inf
-            hi = -np.inf
-            for t in range(nt):
-                lo = min(lo, acc_tb6[t, b, d])
-                hi = max(hi, acc_tb6[t, b, 3 + d])
-            mid_b3[b, d] = 0.5 * (lo + hi)
+def _brick_centres(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, hi_b3, mid_b3):
+    """Centre of the bounding box of the displacements ``pos - ref`` of each brick into ``mid_b3``
+    (``hi_b3``: scratch of its shape)."""
+    _brick_bounds(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, mid_b3, hi_b3)
+    mid_b3 += hi_b3
+    mid_b3 *= 0.5
 
 
 @njit(cache=True, parallel=True)
@@ -1068,8 +1057,8 @@ class NeighborList:
         if m <= lim or h2 <= lim:
             return False
         if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
-            brick_n, blo, bhi, box, periodic_c, acc, mid, acc2, rad = self._bricks
-            _brick_centres(pos, self.ref_nc, brick_n, blo.shape[0], acc, mid)
+            brick_n, blo, bhi, box, periodic_c, acc, mid, hi, acc2, rad = self._bricks
+            _brick_centres(pos, self.ref_nc, box, periodic_c, brick_n, acc, hi, mid)
             _brick_radii(pos, self.ref_nc, brick_n, mid, acc2, rad)
             if _bricks_safe(mid, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
                 self.nlocal += 1
@@ -1171,7 +1160,8 @@ class NeighborList:
         if m < 2:
             return
         self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
-                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 3)), np.empty((BRICK_CHUNKS, m, 2)),
+                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 3)), np.empty((m, 3)),
+                        np.empty((BRICK_CHUNKS, m, 2)),
                         np.empty((m, 2)))
 
     def _image_table(self, krange, box):
