@@ -436,7 +436,7 @@ def _damped_save(dyn):
     par = {k: v for k, v in dyn.calc.parameters.items() if v is not None}
     if "materials" in par:
         par["materials"] = [m if isinstance(m, str) else getattr(m, "name", m) for m in par["materials"]]
-    return {"dynamics": dyn.get_state(), "calculator": {"class": "ClusterDynamics", "parameters": par}}
+    return {"dynamics": dyn.get_state(copy=False), "calculator": {"class": "ClusterDynamics", "parameters": par}}
 
 
 def _damped_load(atoms, state, **kwargs):

@@ -608,9 +608,11 @@ class DampedVerlet(MolecularDynamics):
                 "residual": change - (work + layers - loss - diss - rk - ru)}
 
     # -- checkpoint state (files: clusterdyn.io.checkpoint.save_run / load_run) ----------------
-    def get_state(self):
+    def get_state(self, copy=True):
         """Everything a bit-identical restart needs besides the Atoms and their constraints
-        (which :func:`clusterdyn.io.checkpoint.save_run` stores with the drives' own state)."""
+        (which :func:`clusterdyn.io.checkpoint.save_run` stores with the drives' own state).
+        ``copy=False``: the list's reference positions and the forces as they are, not copied
+        (for a writer that stores them at once: a checkpoint then adds no N-sized copies)."""
         nl = getattr(self.calc, "nl", None)
         st = {"nsteps": self.nsteps, "dt": self.dt, "J": -1.0 if self.J is None else self.J,
               "damping_loss": self.damping_loss, "dissipation": self._dissipation}
@@ -623,9 +625,9 @@ class DampedVerlet(MolecularDynamics):
         if self._ledger0 is not None:
             st["ledger0"] = dict(self._ledger0)
         if nl is not None and nl.ref_nc is not None:
-            st["nl_ref"] = nl.ref_nc.copy()
+            st["nl_ref"] = nl.ref_nc.copy() if copy else nl.ref_nc
         if self.forces is not None:
-            st["forces"] = self.forces.copy()
+            st["forces"] = self.forces.copy() if copy else self.forces
             st["potential_energy"] = self.potential_energy
         return st
 

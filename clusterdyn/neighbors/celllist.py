@@ -520,6 +520,21 @@ def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4,
     return m
 
 
+def _carried_need(need_b, rows_b, new_rows_b, mean):
+    """Slab sizes for new blocks after the particle count changed (particles removed): each new
+    block gets its rows times the densest pairs-per-row of the old blocks over the same share of
+    the rows (one block wider on each side), times the margin, so the pool needs no more room
+    than before and is not reallocated (the fill retries a block that needs more)."""
+    dens = need_b / np.maximum(rows_b, 1)
+    ostart = np.concatenate([[0], np.cumsum(rows_b)])
+    nstart = np.concatenate([[0], np.cumsum(new_rows_b)])
+    scale = ostart[-1] / max(nstart[-1], 1)
+    lo = np.clip(np.searchsorted(ostart, nstart[:-1] * scale, side="right") - 2, 0, dens.shape[0] - 1)
+    hi = np.clip(np.searchsorted(ostart, nstart[1:] * scale, side="left") + 1, lo + 1, dens.shape[0])
+    top = np.array([dens[a:b].max() for a, b in zip(lo, hi)])
+    return np.maximum((new_rows_b * top * SLAB_MARGIN).astype(np.int64), (new_rows_b * mean).astype(np.int64))
+
+
 @njit(cache=True)
 def _close_slabs(pool_p, slab_b, need_b, first_n):
     """Move the slabs' pairs together (in place, in block order) and turn the row counts in
@@ -1017,6 +1032,7 @@ class NeighborList:
         self._cap = 0
         self._pool = np.empty(0, np.uint32)
         self._slab_need = None
+        self._slab_rows = None
         self._ppr = (8.0, 8.0)          # pairs per row at the last build: mean, largest of a block
         self._bricks = None             # the local rebuild test (centered lists): see _set_bricks
         self._brick_side = 0.0
@@ -1266,6 +1282,8 @@ class NeighborList:
         mean, top = self._ppr
         if need is not None and need.shape[0] == nblk:
             est = np.maximum((need * SLAB_MARGIN).astype(np.int64), (rows_b * mean).astype(np.int64))
+        elif need is not None:
+            est = _carried_need(need, self._slab_rows, rows_b, mean)
         else:
             est = (rows_b * (top * 1.1)).astype(np.int64)
         est += 64
@@ -1285,6 +1303,7 @@ class NeighborList:
                 break
         self._cap = cap
         self._slab_need = need_b
+        self._slab_rows = rows_b
         self._ppr = (float(need_b.sum() / max(n, 1)), float((need_b / np.maximum(rows_b, 1)).max()))
         npairs = _close_slabs(self._pool, slab, need_b, first_n)
         self.jp_p = self._pool[:npairs]
