@@ -167,7 +167,8 @@ def main(argv=None):
                     f"{lm['rate']:.3g} ({lm['builds']} builds, dangerous {lm['dangerous']}), load {lm['load']:.1f}")
     meta["load_end"] = os.getloadavg()
     rep = {"meta": meta, "args": {k: v for k, v in vars(a).items()}, "runs": runs,
-           "windows": [{k: ({j: str(p) for j, p in v.items()} if k == "states" else v) for k, v in w.items()}
+           "windows": [{k: ({j: os.path.relpath(p, HERE.parent) for j, p in v.items()} if k == "states" else v)
+                        for k, v in w.items()}
                        for w in windows]}
     md = markdown(rep)
     out = Path(a.out)
