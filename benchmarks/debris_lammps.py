@@ -137,7 +137,6 @@ def main(argv=None):
     tmp = Path(tempfile.mkdtemp(prefix="cd_debris_lmp_"))
     meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "load_start": os.getloadavg(), "steps": a.steps}
     windows = []
-    n = None
     for step in [int(s) for s in a.at.split(",")]:
         log(f"debris state at step {step}")
         st, st_off = debris_state(a, step)

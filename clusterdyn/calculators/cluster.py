@@ -12,6 +12,7 @@ from ..materials import get_material
 from ..neighbors import NeighborList
 from ..potentials import DEFAULT_RC, N_BINS, ClusterPotential, MixedPairPotential, build_tables, check_rc
 from ..neighbors.celllist import gather_velocities, kick_drift_gather
+from ..buffers import grown
 from ..parallel import STREAM_BLOCK, use_threads
 from . import _cd_kernels as K
 
@@ -266,8 +267,7 @@ class ClusterDynamics(Calculator):
             lay["e_m1"] = np.empty((m, 1))
             lay["w_m6"] = np.empty((m, 6))
         if damped and lay["vs"] is None:
-            if lay["vs_store"] is None or lay["vs_store"].shape[0] < n:
-                lay["vs_store"] = np.empty((n, 3))
+            lay["vs_store"] = grown(lay["vs_store"], n)
             lay["vs"] = lay["vs_store"][:n]
         return lay
 

@@ -20,6 +20,7 @@ from ase.md.md import MolecularDynamics
 
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
+from ..buffers import grown
 from ..parallel import use_threads
 from . import _integrate as I
 from .drives import Drive, _Layer
@@ -318,8 +319,7 @@ class DampedVerlet(MolecularDynamics):
             # two force buffers taking turns: the forces of the previous step stay valid (they grow,
             # never shrink: removing particles takes views of them)
             n = len(atoms)
-            if self._fbuf is None or self._fbuf[0].shape[0] < n:
-                self._fbuf = [np.empty((n, 3)), np.empty((n, 3))]
+            self._fbuf = [grown(b, n) for b in (self._fbuf or (None, None))]
             self._fturn ^= 1
             out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn][:n],
                                     virial=False, energy=False,

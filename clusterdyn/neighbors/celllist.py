@@ -29,6 +29,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..buffers import grown
 from ..errors import InputError
 from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take, use_threads
 
@@ -266,26 +267,14 @@ def _count_sort(cell_n, ncell, perm):
     return ukey, ustart, start
 
 
-def _sort_dense(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n):
-    """Counting sort of the particles by cell over a dense grid (slot 0 slowest), stable in the
-    original order.  Fills ``perm`` (sorted row k is particle perm[k]), the sorted wrapped
-    positions ``xs_nc`` and wrap offsets ``offs_nc``; returns the occupied cells
-    ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1]) and the
-    dense row starts ``start`` (ncell + 1).  The keys and the gather run in parallel, the
-    counting in one thread.  ``key_n``: scratch of N int64."""
-    _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
-    ukey, ustart, start = _count_sort(key_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
-    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
-    return ukey, ustart, start
-
-
 #: bits per digit of the radix sort of sparse cell keys
 RADIX_BITS = 11
 
 
 @njit(cache=True)
 def _radix_sort(key, perm):
-    """Stable LSD radix sort of the keys ``key`` (>= 0; used as scratch) into ``perm``; returns the occupied cells ``(ukey, ustart)``."""
+    """Stable LSD radix sort of the keys ``key`` (>= 0; used as scratch) into ``perm``; returns
+    the occupied cells ``(ukey, ustart)``."""
     n = key.shape[0]
     idx = np.empty(n, np.int64)
     kmax = 0
@@ -333,13 +322,22 @@ def _radix_sort(key, perm):
     return ukey, ustart
 
 
-def _sort_sparse(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n):
-    """As :func:`_sort_dense` (the same order), but by a radix sort of the cell keys: memory
-    O(N), whatever the number of cells of the bounding box.  Returns (ukey, ustart)."""
+def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n, sparse):
+    """Sort of the particles by cell (slot 0 slowest), stable in the original order: a counting
+    sort over the dense grid, or with ``sparse`` a radix sort of the cell keys (memory O(N)
+    whatever the number of cells of the bounding box; the same order).  Fills ``perm`` (sorted
+    row k is particle perm[k]), the sorted wrapped positions ``xs_nc`` and wrap offsets
+    ``offs_nc``; returns the occupied cells ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds
+    rows ustart[q]..ustart[q+1]) and the dense row starts (ncell + 1; empty with ``sparse``).
+    The keys (into the scratch ``key_n``) and the gather run in parallel, the sort in one thread."""
     _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
-    ukey, ustart = _radix_sort(key_n, perm)
+    if sparse:
+        ukey, ustart = _radix_sort(key_n, perm)
+        dstart = np.empty(0, np.int64)
+    else:
+        ukey, ustart, dstart = _count_sort(key_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
     _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
-    return ukey, ustart
+    return ukey, ustart, dstart
 
 
 @njit(inline="always")
@@ -774,39 +772,61 @@ def _number_bricks(key_n, maxb, brick_n):
     return m
 
 
-@njit(cache=True, parallel=True)
-def _brick_bounds(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, lo_b3, hi_b3):
-    """Per brick, the bounding box of its particles' wrapped positions (``ref_nc`` with no rows)
-    or of their displacements ``pos - ref`` (fixed particle chunks, then their reduction: the
-    result does not depend on the thread count)."""
-    n = pos_nc.shape[0]
-    nt = acc_tb6.shape[0]
-    nb = lo_b3.shape[0]
-    disp = ref_nc.shape[0] > 0
-    for t in prange(nt):
-        for b in range(nb):
-            for d in range(3):
-                acc_tb6[t, b, d] = np.inf
-                acc_tb6[t, b, 3 + d] = -np.inf
-        for i in range(t * n // nt, (t + 1) * n // nt):
-            b = brick_n[i]
-            for d in range(3):
-                x = pos_nc[i, d] - ref_nc[i, d] if disp else _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-                acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
-                acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
-    for b in range(nb):
+@njit(inline="always")
+def _minmax_clear(acc_tb6, t):
+    """Empty the bounds of chunk t (min in columns 0-2, max in 3-5) for every brick."""
+    for b in range(acc_tb6.shape[1]):
+        for d in range(3):
+            acc_tb6[t, b, d] = np.inf
+            acc_tb6[t, b, 3 + d] = -np.inf
+
+
+@njit(inline="always")
+def _minmax_take(acc_tb6, t, b, d, x):
+    acc_tb6[t, b, d] = min(acc_tb6[t, b, d], x)
+    acc_tb6[t, b, 3 + d] = max(acc_tb6[t, b, 3 + d], x)
+
+
+@njit(cache=True)
+def _minmax_reduce(acc_tb6, lo_b3, hi_b3):
+    """Bounds of each brick over the chunks (fixed particle chunks: the result does not depend
+    on the thread count)."""
+    for b in range(lo_b3.shape[0]):
         for d in range(3):
             lo = np.inf
             hi = -np.inf
-            for t in range(nt):
+            for t in range(acc_tb6.shape[0]):
                 lo = min(lo, acc_tb6[t, b, d])
                 hi = max(hi, acc_tb6[t, b, 3 + d])
             lo_b3[b, d] = lo
             hi_b3[b, d] = hi
 
 
-#: ``ref_nc`` of :func:`_brick_bounds` for the boxes of the positions themselves
-_NO_REF = np.zeros((0, 3))
+@njit(cache=True, parallel=True)
+def _brick_boxes(pos_nc, box_c, periodic_c, brick_n, acc_tb6, lo_b3, hi_b3):
+    """Per brick, the bounding box of its particles' wrapped positions (at a build)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    for t in prange(nt):
+        _minmax_clear(acc_tb6, t)
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            for d in range(3):
+                _minmax_take(acc_tb6, t, brick_n[i], d, _wrap1(pos_nc[i, d], box_c[d], periodic_c[d]))
+    _minmax_reduce(acc_tb6, lo_b3, hi_b3)
+
+
+@njit(cache=True, parallel=True)
+def _brick_displacement_boxes(pos_nc, ref_nc, brick_n, acc_tb6, lo_b3, hi_b3):
+    """Per brick, the bounding box of its particles' displacements ``pos - ref`` (at each local
+    test: a loop of its own, with no per-element choice between the two kinds of box)."""
+    n = pos_nc.shape[0]
+    nt = acc_tb6.shape[0]
+    for t in prange(nt):
+        _minmax_clear(acc_tb6, t)
+        for i in range(t * n // nt, (t + 1) * n // nt):
+            for d in range(3):
+                _minmax_take(acc_tb6, t, brick_n[i], d, pos_nc[i, d] - ref_nc[i, d])
+    _minmax_reduce(acc_tb6, lo_b3, hi_b3)
 
 
 def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3, key_n):
@@ -818,15 +838,14 @@ def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, b
     _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n)
     m = _number_bricks(key_n, maxb, brick_n)
     if m > 0:
-        _brick_bounds(pos_nc, _NO_REF, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m],
-                      bhi_b3[:m])
+        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m], bhi_b3[:m])
     return m
 
 
-def _brick_centres(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, hi_b3, mid_b3):
+def _brick_centres(pos_nc, ref_nc, brick_n, acc_tb6, hi_b3, mid_b3):
     """Centre of the bounding box of the displacements ``pos - ref`` of each brick into ``mid_b3``
     (``hi_b3``: scratch of its shape)."""
-    _brick_bounds(pos_nc, ref_nc, box_c, periodic_c, brick_n, acc_tb6, mid_b3, hi_b3)
+    _brick_displacement_boxes(pos_nc, ref_nc, brick_n, acc_tb6, mid_b3, hi_b3)
     mid_b3 += hi_b3
     mid_b3 *= 0.5
 
@@ -1074,7 +1093,7 @@ class NeighborList:
             return False
         if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
             brick_n, blo, bhi, box, periodic_c, acc, mid, hi, acc2, rad = self._bricks
-            _brick_centres(pos, self.ref_nc, box, periodic_c, brick_n, acc, hi, mid)
+            _brick_centres(pos, self.ref_nc, brick_n, acc, hi, mid)
             _brick_radii(pos, self.ref_nc, brick_n, mid, acc2, rad)
             if _bricks_safe(mid, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
                 self.nlocal += 1
@@ -1138,8 +1157,7 @@ class NeighborList:
             self._build_unsorted(pos, *geo)
         if self.centered:
             self._set_bricks(pos, geo)
-        if self._ref_store is None or self._ref_store.shape[0] < pos.shape[0]:
-            self._ref_store = np.empty_like(pos)
+        self._ref_store = grown(self._ref_store, pos.shape[0])
         self.ref_nc = self._ref_store[:pos.shape[0]]
         np.copyto(self.ref_nc, pos)
         self._key = _box_key(cell, pbc)
@@ -1224,19 +1242,17 @@ class NeighborList:
         """Scratch of n int64 (the cell and brick keys of a build), kept across builds (grows only):
         allocating it per build fragments the heap (about 80 bytes per particle held after a few
         hundred builds)."""
-        if self._key_store is None or self._key_store.shape[0] < n:
-            self._key_store = np.empty(n, np.int64)
+        self._key_store = grown(self._key_store, n, (), np.int64)
         return self._key_store[:n]
 
     def _sorted_buffers(self, n):
         """The sorted rows' arrays for n particles: views of buffers kept across builds, which
         grow but never shrink, so that removing particles allocates nothing (every build writes
         every row of them)."""
-        st = self._store
-        if st is None or st[0].shape[0] < n:
-            st = self._store = (np.empty((n, 3)), np.empty((n, 3)), np.empty(n, np.int64),
-                                np.zeros(n + 1, np.int64))
-        self.xs_nc, self.offs_nc, self.perm_n, self.first_n = st[0][:n], st[1][:n], st[2][:n], st[3][:n + 1]
+        xs, offs, perm, first = self._store or (None,) * 4
+        self._store = (grown(xs, n), grown(offs, n), grown(perm, n, (), np.int64), grown(first, n + 1, (), np.int64))
+        xs, offs, perm, first = self._store
+        self.xs_nc, self.offs_nc, self.perm_n, self.first_n = xs[:n], offs[:n], perm[:n], first[:n + 1]
         return self.perm_n, self.xs_nc, self.offs_nc
 
     def _build_sorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
@@ -1259,13 +1275,8 @@ class NeighborList:
         dense_cells = float(np.prod(ncell.astype(float)))
         sparse = (self.cells == "sparse"
                   or (self.cells == "auto" and dense_cells > DENSE_CELLS_PER_PARTICLE * max(n, 1) + 27))
-        if sparse:
-            ukey, ustart = _sort_sparse(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
-                                        self._keys(n))
-            dstart = np.empty(0, np.int64)
-        else:
-            ukey, ustart, dstart = _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
-                                               self._keys(n))
+        ukey, ustart, dstart = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+                                          self._keys(n), sparse)
         if n >= 2 ** HALF_SHIFT:
             raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
         nslot = ncell[axes]
@@ -1321,7 +1332,7 @@ class NeighborList:
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
         cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        _sort_dense(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self._keys(n))
+        _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self._keys(n), False)
         first_n = self.first_n
         first_n[:] = 0
         # _search decodes cells with x slowest: re-bin the sorted rows that way
