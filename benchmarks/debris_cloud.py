@@ -89,7 +89,8 @@ def build(a, region):
         c, h = 0.5 * (lo + hi), 0.5 * (hi - lo) * a.region
         roi = RegionOfInterest(c - h, c + h)
     J = None if a.J == "none" else float(a.J)
-    dyn = DampedVerlet(atoms, timestep=dt, J=J, region=roi, remove_interval=a.remove_interval)
+    dyn = DampedVerlet(atoms, timestep=dt, J=J, region=roi, remove_interval=a.remove_interval,
+                       sort_interval=a.sort_interval or None)
     return atoms, dyn
 
 
@@ -102,6 +103,8 @@ def add_scene_args(ap, sphere, thickness, radius):
     ap.add_argument("--v", type=float, default=6.7, help="km/s")
     ap.add_argument("--J", default="50")
     ap.add_argument("--dt-factor", type=float, default=0.1)
+    ap.add_argument("--sort-interval", type=int, default=100,
+                    help="steps between sorts of the Atoms into the list's cell order (0: never)")
 
 
 def worker_slab(a):
@@ -279,7 +282,7 @@ def main(argv=None):
     for run in a.runs.split(","):          # the two runs side by side, each on one thread
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "run", "--run", run]
         for k in ("sphere", "plate_thickness", "plate_radius", "r0", "v", "J", "dt_factor", "growth", "chunk",
-                  "max_steps", "region", "remove_interval", "slab_steps", "slab_fraction", "out"):
+                  "max_steps", "region", "remove_interval", "slab_steps", "slab_fraction", "sort_interval", "out"):
             cmd += [f"--{k.replace('_', '-')}", str(getattr(a, k))]
         if a.resume:
             cmd.append("--resume")

@@ -156,7 +156,7 @@ def main(argv=None):
     for rep in range(a.repeat):
         for J in (a.J, "none"):
             for w in [*windows, slab_w]:
-                cd = lt._run_cd(w["states"][J], "none" if J == "none" else J, 1, a.steps)
+                cd = lt._run_cd(w["states"][J], "none" if J == "none" else J, 1, a.steps, a.sort_interval)
                 lm = lt.lammps_rate(Path(w["decks"][J]), 1)
                 runs.append({"repeat": rep, "J": J, "window": w["step"], "clusterdyn": cd["rate"],
                              "cd_cpu_rate": cd["N"] * a.steps / cd["cpu_s"], "cd_builds": cd["builds"],

@@ -84,6 +84,9 @@ def worker_cd(a):
     base = status("VmRSS")
     atoms, dyn, extra = load_state(a.state, J=J)
     dyn.run(2)                      # kernels from the on-disk cache, first forces
+    if a.sort_interval:
+        dyn.sort_interval = a.sort_interval     # sort the Atoms as LAMMPS does by default (atom_modify sort)
+        dyn.sort_atoms()
     n = len(atoms)
     gc.collect()
     trim()                         # free heap left by reading the checkpoint back to the system
@@ -162,9 +165,9 @@ def lammps_rate(folder, procs):
             "memory_mb_total": r.memory_mb_total, "load": os.getloadavg()[0]}
 
 
-def _run_cd(state, J, threads, steps):
+def _run_cd(state, J, threads, steps, sort_interval=0):
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "cd", "--state", str(state), "--J", J,
-           "--threads", str(threads), "--steps", str(steps)]
+           "--threads", str(threads), "--steps", str(steps), "--sort-interval", str(sort_interval)]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
     if p.returncode != 0:
         raise RuntimeError(p.stderr[-3000:])
@@ -343,6 +346,8 @@ def markdown(rep):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--worker", choices=["cd"])
+    ap.add_argument("--sort-interval", type=int, default=0,
+                    help="clusterdyn sorts the Atoms into cell order every this many steps (0: never)")
     ap.add_argument("--state")
     ap.add_argument("--J", default="none")
     ap.add_argument("--threads", type=int, default=1)

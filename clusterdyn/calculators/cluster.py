@@ -415,6 +415,17 @@ class ClusterDynamics(Calculator):
         self._advanced = (id(pos), nl.nbuilds, m2, h2, damped, self._setup_key)
         return v2max, k
 
+    def renumbered(self, order):
+        """The Atoms were reordered in place, new particle k being old particle ``order[k]``
+        (:meth:`clusterdyn.md.DampedVerlet.sort_atoms`; the list was renumbered with them): drop
+        what was cached by array identity and rename the closest pair of :attr:`last_stats`."""
+        self.reset()
+        self._types_key = self._types_cache = None
+        self._advanced = None
+        st = self.last_stats
+        if st is not None and dict.__contains__(st, "closest") and st["closest"][0] >= 0:
+            st["closest"] = tuple(int(np.flatnonzero(order == i)[0]) for i in st["closest"])
+
     def _types(self, atoms, key):
         """Material ids (checked); for one material checked once per list build or new array."""
         mid = atoms.arrays.get("material")

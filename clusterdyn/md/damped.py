@@ -20,7 +20,7 @@ from ase.md.md import MolecularDynamics
 
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
-from ..buffers import grown
+from ..buffers import PERMUTE_WORDS, grown, permute
 from ..parallel import use_threads
 from . import _integrate as I
 from .drives import Drive, _Layer
@@ -177,6 +177,17 @@ class DampedVerlet(MolecularDynamics):
         is added (``0..N-1``) when the Atoms have none.
     remove_interval : int, default 10
         Steps between the region checks.
+    sort_interval : int or None, default None
+        Every ``sort_interval`` steps (at the end of a step), sort the Atoms into
+        the neighbour list's cell order (:meth:`sort_atoms`), as LAMMPS'
+        ``atom_modify sort``: the per-particle passes of a step then read
+        memory nearly in sequence, which keeps the speed of samples whose
+        particles mix (debris clouds: docs/performance.md, "Sorting the
+        Atoms").  Particle indices change (every array and the constraints'
+        indices follow, as for ``region``); ``atoms.arrays['id']`` names the
+        particles (added, ``0..N-1``, when the Atoms have none) and the H5MD
+        writer orders its rows by it.  None (default): the order is never
+        changed.  Needs the ClusterDynamics calculator.
     trajectory, logfile, loginterval :
         As for ASE's MolecularDynamics.
 
@@ -191,7 +202,7 @@ class DampedVerlet(MolecularDynamics):
     """
 
     def __init__(self, atoms, timestep=None, J=50, *, check_interval=1, region=None, remove_interval=10,
-                 trajectory=None, logfile=None, loginterval=1, **kwargs):
+                 sort_interval=None, trajectory=None, logfile=None, loginterval=1, **kwargs):
         calc = atoms.calc
         if J is not None:
             try:
@@ -212,10 +223,7 @@ class DampedVerlet(MolecularDynamics):
             if np.any(np.isfinite(region.lo[per])) or np.any(np.isfinite(region.hi[per])):
                 raise InputError("region", repr(region), "no bound along the periodic axes "
                                  f"{[ax for ax, p in zip('xyz', per) if p]}")
-            for c in atoms.constraints:
-                if not hasattr(c, "index_shuffle"):
-                    raise InputError("atoms.constraints", type(c).__name__,
-                                     "constraints that follow removed particles (index_shuffle) with region=")
+            self._check_shuffle(atoms, "region=")
             if "id" not in atoms.arrays:
                 atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
         try:
@@ -224,6 +232,23 @@ class DampedVerlet(MolecularDynamics):
             raise InputError("remove_interval", remove_interval, "a positive number of steps") from None
         if remove_interval < 1:
             raise InputError("remove_interval", remove_interval, "a positive number of steps")
+        if sort_interval is not None:
+            try:
+                ok = int(sort_interval) == sort_interval and int(sort_interval) >= 1
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise InputError("sort_interval", sort_interval, "a positive whole number of steps, or None")
+            sort_interval = int(sort_interval)
+            if not isinstance(calc, ClusterDynamics):
+                raise InputError("atoms.calc", type(calc).__name__, "a ClusterDynamics calculator with sort_interval")
+            self._check_shuffle(atoms, "sort_interval=")
+            if "id" not in atoms.arrays:
+                atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
+        self.sort_interval = sort_interval
+        self._sort_scratch = None
+        #: sorts of the Atoms done (:meth:`sort_atoms`)
+        self.nsorts = 0
         self.region = region
         self.remove_interval = remove_interval
         #: what the removed particles took away since the start: count, mass (amu), kinetic and
@@ -269,6 +294,13 @@ class DampedVerlet(MolecularDynamics):
         self._ledger0 = None
         self._drives()
 
+    @staticmethod
+    def _check_shuffle(atoms, what):
+        for c in atoms.constraints:
+            if not hasattr(c, "index_shuffle"):
+                raise InputError("atoms.constraints", type(c).__name__,
+                                 f"constraints that follow renumbered particles (index_shuffle) with {what}")
+
     def _drives(self):
         """The drives among the constraints, bound to this dynamics (binds new ones)."""
         ds = []
@@ -289,6 +321,8 @@ class DampedVerlet(MolecularDynamics):
     def todict(self):
         d = super().todict()
         d.update({"J": self.J, "stability_limit": self.stability_limit})
+        if self.sort_interval is not None:
+            d["sort_interval"] = self.sort_interval
         if self.region is not None:
             d.update({"region": self.region.todict(), "remove_interval": self.remove_interval})
         return d
@@ -460,7 +494,49 @@ class DampedVerlet(MolecularDynamics):
         self.timings["integrate"] += time.perf_counter() - t0
         if self.region is not None and (self.nsteps + 1) % self.remove_interval == 0:
             self.remove_outside()
+        if self.sort_interval is not None and (self.nsteps + 1) % self.sort_interval == 0:
+            self.sort_atoms()
         return self.forces
+
+    def sort_atoms(self):
+        """Reorder the Atoms into the neighbour list's row (cell) order now; returns True if done.
+
+        New particle k is the particle of the list's sorted row k: every array of
+        the Atoms, the constraints' indices, the forces and the list's own
+        per-particle state (reference positions, bricks) are permuted in place
+        (nothing of N's size is allocated beyond a scratch of 8 bytes a particle
+        kept for the next sort), and the list stays valid: no rebuild, and the steps until
+        the next build are the same bit for bit (in ``id`` order) as without
+        the sort.  The next build's cell sort is stable in the new order, so
+        from there the pair sums may add in another order (rounding).  False
+        when the list has not been built over the current particles yet.
+        """
+        atoms = self.atoms
+        nl = getattr(self.calc, "nl", None)
+        n = len(atoms)
+        if (not isinstance(self.calc, ClusterDynamics) or nl is None or nl.perm_n is None or nl.ref_nc is None
+                or nl.ref_nc.shape[0] != n):
+            return False
+        self._check_shuffle(atoms, "sort_atoms()")
+        if self.forces is None:
+            self._refresh_properties()
+        self._sort_scratch = scratch = grown(self._sort_scratch, n, (PERMUTE_WORDS,))
+        order = nl.perm_n                   # new particle k: the list's sorted row k
+        cons = list(atoms.constraints)
+        atoms.set_constraint()
+        for c in cons:
+            c.index_shuffle(atoms, order)
+        for name in list(atoms.arrays):
+            permute(atoms.arrays[name], order, scratch)
+        atoms.set_constraint(cons)
+        for a in (self.forces, self._invm_n):
+            if a is not None and a.shape[0] == n:
+                permute(a, order, scratch)
+        self.masses = atoms.get_masses()[:, None]
+        self.calc.renumbered(order)
+        nl.renumber(scratch)
+        self.nsorts += 1
+        return True
 
     def remove_outside(self):
         """Take the particles outside :attr:`region` out of the Atoms now; returns how many.
@@ -622,6 +698,8 @@ class DampedVerlet(MolecularDynamics):
                              "potential": r["potential"], "momentum": np.array(r["momentum"], dtype=float)}
         if self.region is not None:
             st["region"] = dict(self.region.todict(), remove_interval=self.remove_interval)
+        if self.sort_interval is not None:
+            st["sort_interval"] = self.sort_interval
         if self._ledger0 is not None:
             st["ledger0"] = dict(self._ledger0)
         if nl is not None and nl.ref_nc is not None:
@@ -650,6 +728,14 @@ class DampedVerlet(MolecularDynamics):
                   or iv != self.remove_interval):
                 raise InputError("region", repr(self.region), f"the checkpoint's {reg!r} every {iv} steps",
                                  hint="a restart keeps the run's region of interest")
+        if "sort_interval" in st:
+            iv = int(st["sort_interval"])
+            if self.sort_interval is None:
+                self._check_shuffle(self.atoms, "sort_interval=")
+                self.sort_interval = iv
+            elif iv != self.sort_interval:
+                raise InputError("sort_interval", self.sort_interval, f"the checkpoint's {iv}",
+                                 hint="a restart keeps the run's sort interval")
         if "ledger0" in st:
             self._ledger0 = {k: float(x) for k, x in st["ledger0"].items()}
         nl = getattr(self.calc, "nl", None)

@@ -447,11 +447,15 @@ def _shuffle(index, ind, what):
     ind = np.asarray(ind)
     if ind.dtype == bool:
         ind = np.nonzero(ind)[0]
-    pos = {int(old): new for new, old in enumerate(ind)}
-    kept = [pos[i] for i in index if int(i) in pos]
-    if not kept:
+    index = np.asarray(index, dtype=np.int64)
+    size = int(max(ind.max(initial=-1), index.max(initial=-1))) + 1
+    new = np.full(size, -1, np.int64)
+    new[ind] = np.arange(ind.shape[0])
+    kept = new[index]
+    kept = kept[kept >= 0]
+    if not kept.size:
         raise IndexError(f"no {what} particle left")
-    return np.array(kept, dtype=np.int64)
+    return kept
 
 
 # -- the family ---------------------------------------------------------------------------------

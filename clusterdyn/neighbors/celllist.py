@@ -26,10 +26,11 @@ cells of the 3x3x3 stencil.  The caller's arrays are never reordered.
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
-from ..buffers import grown
+from ..buffers import grown, permute
 from ..errors import InputError
 from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take, use_threads
 
@@ -719,30 +720,40 @@ def _displacement(pos_nc, ref_nc, out2):
 
 # -- the local rebuild test: bricks -----------------------------------------------------------------
 
-#: most occupied bricks of the local rebuild test (their pairs are checked each time the global test fails)
+#: most occupied bricks of the local rebuild test: this many, or one per
+#: :data:`PARTICLES_PER_BRICK` particles if more (bricks double in size until they fit)
 MAX_BRICKS = 512
-#: fixed particle chunks of the brick pass (the result does not depend on the thread count)
-BRICK_CHUNKS = 16
+PARTICLES_PER_BRICK = 16
+#: smallest side of a brick, in cut-offs (cutoff + skin)
+BRICK_SIDE = 8.0
+#: widest neighbourhood of bricks (cubes each way) the local test walks; farther reach rebuilds
+MAX_BRICK_REACH = 3
+
+
+def _brick_chunks():
+    """Particle chunks of the brick passes: one per thread.  Their results are minima and maxima,
+    exact in any grouping, so they do not depend on the thread count."""
+    return max(1, min(64, int(numba.config.NUMBA_NUM_THREADS)))
 
 
 @njit(cache=True, parallel=True)
-def _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n):
-    """Key of the cube of ``side`` (over the box, open axes from ``lo_c``) of every particle."""
-    inv = 1.0 / side
+def _brick_keys(pos_nc, box_c, periodic_c, lo_c, csz_c, nb_c, key_n):
+    """Key of the cube (sides ``csz_c``, over the box along periodic axes, from ``lo_c`` along
+    open ones) of every particle."""
     for i in prange(pos_nc.shape[0]):
         key = 0
         for d in range(3):
             w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            k = min(max(int(math.floor((w - lo_c[d]) * inv)), 0), nb_c[d] - 1)
+            k = min(max(int(math.floor((w - lo_c[d]) / csz_c[d])), 0), nb_c[d] - 1)
             key = key * nb_c[d] + k
         key_n[i] = key
 
 
 @njit(cache=True)
-def _number_bricks(key_n, maxb, brick_n):
-    """Each particle's brick, numbered in order of first appearance, into ``brick_n``; returns the
-    number of bricks, or -1 beyond ``maxb``.  A particle in its predecessor's brick (most, in a
-    sample built lattice by lattice) skips the hash table."""
+def _number_bricks(key_n, maxb, brick_n, bkey_b):
+    """Each particle's brick, numbered in order of first appearance, into ``brick_n``, and each
+    brick's key into ``bkey_b``; returns the number of bricks, or -1 beyond ``maxb``.  A particle
+    in its predecessor's brick (most, in a sample built lattice by lattice) skips the hash table."""
     n = key_n.shape[0]
     h = 4
     while h < 4 * maxb:
@@ -765,6 +776,7 @@ def _number_bricks(key_n, maxb, brick_n):
                 return -1
             hkey[s] = key
             hval[s] = m
+            bkey_b[m] = key
             m += 1
         last = key
         lastb = hval[s]
@@ -829,16 +841,16 @@ def _brick_displacement_boxes(pos_nc, ref_nc, brick_n, acc_tb6, lo_b3, hi_b3):
     _minmax_reduce(acc_tb6, lo_b3, hi_b3)
 
 
-def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, side, nb_c, maxb, brick_n, blo_b3, bhi_b3, key_n):
-    """Cubes of ``side`` over the box (open axes from ``lo_c``): each particle's brick (numbered
-    in order of first appearance) into ``brick_n`` and each brick's bounding box of the wrapped
-    positions into ``blo_b3[:m]``, ``bhi_b3[:m]``; returns the number m of occupied bricks, or -1
-    beyond ``maxb``.  The keys (into the scratch ``key_n``) and the boxes in parallel, the
-    numbering in one thread."""
-    _brick_keys(pos_nc, box_c, periodic_c, lo_c, side, nb_c, key_n)
-    m = _number_bricks(key_n, maxb, brick_n)
+def _assign_bricks(pos_nc, box_c, periodic_c, lo_c, csz_c, nb_c, maxb, brick_n, blo_b3, bhi_b3, bkey_b, key_n):
+    """Cubes of sides ``csz_c`` over the box (open axes from ``lo_c``): each particle's brick
+    (numbered in order of first appearance) into ``brick_n``, each brick's key into ``bkey_b`` and
+    its bounding box of the wrapped positions into ``blo_b3[:m]``, ``bhi_b3[:m]``; returns the
+    number m of occupied bricks, or -1 beyond ``maxb``.  The keys (into the scratch ``key_n``)
+    and the boxes in parallel, the numbering in one thread."""
+    _brick_keys(pos_nc, box_c, periodic_c, lo_c, csz_c, nb_c, key_n)
+    m = _number_bricks(key_n, maxb, brick_n, bkey_b)
     if m > 0:
-        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((BRICK_CHUNKS, m, 6)), blo_b3[:m], bhi_b3[:m])
+        _brick_boxes(pos_nc, box_c, periodic_c, brick_n, np.empty((_brick_chunks(), m, 6)), blo_b3[:m], bhi_b3[:m])
     return m
 
 
@@ -895,32 +907,135 @@ def _brick_radii(pos_nc, ref_nc, brick_n, mid_b3, acc_tb2, out_b2):
         out_b2[b, 1] = math.sqrt(r2)
 
 
+@njit(inline="always")
+def _brick_pair_safe(a, b, mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+    """The test of :func:`_bricks_safe` for the bricks a and b."""
+    s2 = 0.0
+    c2 = 0.0
+    for d in range(3):
+        g = max(0.0, blo_b3[b, d] - bhi_b3[a, d], blo_b3[a, d] - bhi_b3[b, d])
+        if periodic_c[d]:
+            g = min(g, max(0.0, blo_b3[a, d] + box_c[d] - bhi_b3[b, d]),
+                    max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
+        s2 += g * g
+        c2 += (mid_b3[a, d] - mid_b3[b, d]) ** 2
+    bound = math.sqrt(c2) + rad_b2[a, 0] + rad_b2[b, 0]
+    return bound <= max(skin, math.sqrt(s2) - rc)
+
+
 @njit(cache=True)
-def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
+def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, skey_b, sid_b, nb_c, csz_c, box_c, periodic_c, skin, rc,
+                 maxreach):
     """True when no pair can have come within ``rc`` unlisted: for every two bricks a, b,
     |centre_a - centre_b| + R_a + R_b (the centres of their displacement boxes and the largest
     distances from them, :func:`_brick_radii`, bound any |d_i - d_j|; within one brick the two
     largest distances) is at most max(skin, S_ab - rc), S_ab the distance between their
     position boxes at the build (a pair not listed was at least cutoff + skin and at least
-    S_ab apart)."""
+    S_ab apart).
+
+    Only bricks near each other are compared.  With E = max_a |centre_a - c| + R_a about the
+    middle c of the centres, the bound of any two bricks is at most 2E, so two bricks whose
+    cubes (sides ``csz_c``, ``nb_c`` a side) are more than rc + 2E apart pass unseen; the
+    others are found among the bricks sorted by cube key (``skey_b``, brick ids ``sid_b``), a
+    cursor per row of the neighbourhood.  False (a rebuild) when that reach exceeds
+    ``maxreach`` cubes along an axis."""
     nb = mid_b3.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
     for a in range(nb):
         if not rad_b2[a, 0] + rad_b2[a, 1] <= skin:
             return False
-        for b in range(a + 1, nb):
-            s2 = 0.0
-            c2 = 0.0
-            for d in range(3):
-                g = max(0.0, blo_b3[b, d] - bhi_b3[a, d], blo_b3[a, d] - bhi_b3[b, d])
-                if periodic_c[d]:
-                    g = min(g, max(0.0, blo_b3[a, d] + box_c[d] - bhi_b3[b, d]),
-                            max(0.0, blo_b3[b, d] + box_c[d] - bhi_b3[a, d]))
-                s2 += g * g
-                c2 += (mid_b3[a, d] - mid_b3[b, d]) ** 2
-            bound = math.sqrt(c2) + rad_b2[a, 0] + rad_b2[b, 0]
-            if not bound <= max(skin, math.sqrt(s2) - rc):
-                return False
+        for d in range(3):
+            lo[d] = min(lo[d], mid_b3[a, d])
+            hi[d] = max(hi[d], mid_b3[a, d])
+    e = 0.0
+    for a in range(nb):
+        r2 = 0.0
+        for d in range(3):
+            r2 += (mid_b3[a, d] - 0.5 * (lo[d] + hi[d])) ** 2
+        e = max(e, math.sqrt(r2) + rad_b2[a, 0])
+    reach = rc + 2.0 * e
+    kk = np.zeros(3, np.int64)
+    full = np.zeros(3, np.bool_)
+    span = np.zeros(3, np.int64)
+    for d in range(3):
+        if periodic_c[d] and nb_c[d] <= 2 * maxreach + 1 and reach >= 0.5 * (nb_c[d] - 1) * csz_c[d]:
+            full[d] = True          # every cube along the axis, once
+        elif not reach <= maxreach * csz_c[d]:
+            return False
+        else:
+            kk[d] = int(reach / csz_c[d]) + 1
+            full[d] = periodic_c[d] and 2 * kk[d] + 1 >= nb_c[d]
+        span[d] = nb_c[d] if full[d] else 2 * kk[d] + 1
+    n1 = nb_c[1]
+    n2 = nb_c[2]
+    w1 = span[1]
+    cur = np.full(span[0] * w1, -1, np.int64)
+    for u in range(nb):
+        key = skey_b[u]
+        a = sid_b[u]
+        g2 = key % n2
+        g1 = (key // n2) % n1
+        g0 = key // (n2 * n1)
+        # ranges along the slowest two axes: every cube when the axis is periodic and the reach
+        # covers it (each once), else g -+ k (wrapped, or clipped to the grid)
+        r0a, r0b = (0, nb_c[0] - 1) if full[0] else (g0 - kk[0], g0 + kk[0])
+        r1a, r1b = (0, n1 - 1) if full[1] else (g1 - kk[1], g1 + kk[1])
+        for h0 in range(r0a, r0b + 1):
+            c0 = h0
+            if c0 < 0 or c0 >= nb_c[0]:
+                if not periodic_c[0]:
+                    continue
+                c0 %= nb_c[0]
+            for h1 in range(r1a, r1b + 1):
+                c1 = h1
+                if c1 < 0 or c1 >= n1:
+                    if not periodic_c[1]:
+                        continue
+                    c1 %= n1
+                row = (h0 - r0a) * w1 + (h1 - r1a)
+                base = (c0 * n1 + c1) * n2
+                # the fastest axis: one range of keys, or two where it wraps a periodic face
+                for part in range(2):
+                    if full[2]:
+                        if part:
+                            break
+                        x0, x1 = 0, n2 - 1
+                    else:
+                        x0 = g2 - kk[2]
+                        x1 = g2 + kk[2]
+                        if periodic_c[2]:
+                            if part == 0:
+                                if x0 < 0:
+                                    x0, x1 = x0 + n2, n2 - 1
+                                elif x1 >= n2:
+                                    x1 = n2 - 1
+                            else:
+                                if g2 - kk[2] < 0:
+                                    x0, x1 = 0, g2 + kk[2]
+                                elif g2 + kk[2] >= n2:
+                                    x0, x1 = 0, g2 + kk[2] - n2
+                                else:
+                                    break
+                        else:
+                            if part:
+                                break
+                            x0 = max(x0, 0)
+                            x1 = min(x1, n2 - 1)
+                    q = _lower(skey_b, base + x0, cur, row)
+                    while q < nb and skey_b[q] <= base + x1:
+                        b = sid_b[q]
+                        if b > a and not _brick_pair_safe(a, b, mid_b3, rad_b2, blo_b3, bhi_b3, box_c,
+                                                          periodic_c, skin, rc):
+                            return False
+                        q += 1
     return True
+
+
+@njit(cache=True)
+def _identity(perm_n):
+    for k in range(perm_n.shape[0]):
+        perm_n[k] = k
 
 
 def _box_key(cell, pbc):
@@ -1054,6 +1169,7 @@ class NeighborList:
         self._slab_rows = None
         self._ppr = (8.0, 8.0)          # pairs per row at the last build: mean, largest of a block
         self._bricks = None             # the local rebuild test (centered lists): see _set_bricks
+        self._brick_store = None
         self._brick_side = 0.0
         self.nlocal = 0                 # rebuilds the local test saved
         self._disp = np.zeros((DISP_BLOCKS, 7))
@@ -1092,10 +1208,11 @@ class NeighborList:
         if m <= lim or h2 <= lim:
             return False
         if self._bricks is not None and math.isfinite(m) and math.isfinite(h2):
-            brick_n, blo, bhi, box, periodic_c, acc, mid, hi, acc2, rad = self._bricks
+            brick_n, blo, bhi, box, periodic_c, acc, mid, hi, acc2, rad, skey, sid, nb_c, csz = self._bricks
             _brick_centres(pos, self.ref_nc, brick_n, acc, hi, mid)
             _brick_radii(pos, self.ref_nc, brick_n, mid, acc2, rad)
-            if _bricks_safe(mid, rad, blo, bhi, box, periodic_c, self.skin, self.cutoff):
+            if _bricks_safe(mid, rad, blo, bhi, skey, sid, nb_c, csz, box, periodic_c, self.skin, self.cutoff,
+                            MAX_BRICK_REACH):
                 self.nlocal += 1
                 return False
         return True
@@ -1164,28 +1281,40 @@ class NeighborList:
         self.nbuilds += 1
 
     def _set_bricks(self, pos, geo):
-        """The local rebuild test's bricks: cubes of at least 8 (cutoff + skin), doubled until at
-        most :data:`MAX_BRICKS` are occupied.
+        """The local rebuild test's bricks: cubes of at least :data:`BRICK_SIDE` (cutoff + skin)
+        (along a periodic axis the box divided evenly), doubled until at most
+        max(:data:`MAX_BRICKS`, N / :data:`PARTICLES_PER_BRICK`) are occupied.
 
         The global test (:meth:`_moved`) bounds every pair's change by the spread of all
         displacements; when it fails, the bricks bound it pair of bricks by pair of bricks,
-        using how far apart the bricks were at the build: an expanding cloud whose
-        neighbourhoods move together keeps its list.  Brick of each particle: 4 bytes.
+        using how far apart the bricks were at the build (:func:`_bricks_safe`): an expanding
+        cloud whose neighbourhoods move together keeps its list.  Brick of each particle: 4
+        bytes; each brick about 100 bytes and 64 per thread.
         """
         lo, ext, ncell, periodic_c, box, rcut = geo
         n = pos.shape[0]
         self._bricks = None
         if n < 2:
             return
-        side = 8.0 * rcut          # from the positions alone: a restart rebuilds the same bricks
+        side = BRICK_SIDE * rcut   # from the positions alone: a restart rebuilds the same bricks
         boxw = np.where(periodic_c, box, 1.0)
-        brick_n = np.empty(n, np.int32)
-        blo = np.empty((MAX_BRICKS, 3))
-        bhi = np.empty((MAX_BRICKS, 3))
+        maxb = max(MAX_BRICKS, n // PARTICLES_PER_BRICK)
+        st = self._brick_store or (None,) * 4
+        st = (grown(st[0], n, (), np.int32), grown(st[1], maxb), grown(st[2], maxb), grown(st[3], maxb, (), np.int64))
+        self._brick_store = st
+        brick_n, blo, bhi, bkey = st[0][:n], st[1], st[2], st[3]
         while True:
-            nb_c = np.array([max(1, int(min(math.floor(ext[d] / side), 2 ** 20)) + 1) for d in range(3)], np.int64)
+            nb_c = np.ones(3, np.int64)
+            csz = np.empty(3)
+            for d in range(3):
+                if periodic_c[d]:
+                    nb_c[d] = max(1, int(min(math.floor(box[d] / side), 2 ** 20)))
+                    csz[d] = box[d] / nb_c[d]
+                else:
+                    nb_c[d] = max(1, int(min(math.floor(ext[d] / side), 2 ** 20)) + 1)
+                    csz[d] = side
             if float(np.prod(nb_c.astype(float))) < 2.0 ** 62:
-                m = _assign_bricks(pos, boxw, periodic_c, lo, side, nb_c, MAX_BRICKS, brick_n, blo, bhi,
+                m = _assign_bricks(pos, boxw, periodic_c, lo, csz, nb_c, maxb, brick_n, blo, bhi, bkey,
                                    self._keys(n))
                 if m > 0:
                     break
@@ -1193,10 +1322,11 @@ class NeighborList:
         self._brick_side = side
         if m < 2:
             return
-        self._bricks = (brick_n, blo[:m].copy(), bhi[:m].copy(), box.astype(float), periodic_c,
-                        np.empty((BRICK_CHUNKS, m, 6)), np.empty((m, 3)), np.empty((m, 3)),
-                        np.empty((BRICK_CHUNKS, m, 2)),
-                        np.empty((m, 2)))
+        order = np.argsort(bkey[:m], kind="stable")
+        nt = _brick_chunks()
+        self._bricks = (brick_n, blo[:m], bhi[:m], box.astype(float), periodic_c,
+                        np.empty((nt, m, 6)), np.empty((m, 3)), np.empty((m, 3)), np.empty((nt, m, 2)),
+                        np.empty((m, 2)), bkey[:m][order], order.astype(np.int64), nb_c, csz)
 
     def _image_table(self, krange, box):
         kx, ky, kz = krange
@@ -1382,6 +1512,19 @@ class NeighborList:
         off = np.empty_like(self.offs_nc)
         off[self.perm_n] = self.offs_nc
         return off
+
+    def renumber(self, scratch):
+        """The caller has reordered its particles into the list's row order (new particle k is
+        old particle ``perm_n[k]``).  The list stays valid without a rebuild: its rows, pairs and
+        sorted arrays are untouched; the reference positions and the bricks of the local test
+        follow, and the row permutation becomes the identity.  ``scratch``: a
+        :func:`clusterdyn.buffers.grown` buffer for :func:`clusterdyn.buffers.permute`."""
+        if self.ref_nc is None or self.perm_n is None or self.ref_nc.shape[0] != self.perm_n.shape[0]:
+            raise InputError("renumber", "a list not built over the current particles", "a built, sorted list")
+        permute(self.ref_nc, self.perm_n, scratch)
+        if self._bricks is not None:
+            permute(self._bricks[0], self.perm_n, scratch)
+        _identity(self.perm_n)
 
     @property
     def npairs(self):
