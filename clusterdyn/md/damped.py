@@ -223,9 +223,7 @@ class DampedVerlet(MolecularDynamics):
             if np.any(np.isfinite(region.lo[per])) or np.any(np.isfinite(region.hi[per])):
                 raise InputError("region", repr(region), "no bound along the periodic axes "
                                  f"{[ax for ax, p in zip('xyz', per) if p]}")
-            self._check_shuffle(atoms, "region=")
-            if "id" not in atoms.arrays:
-                atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
+            self._renumbering(atoms, "region=")
         try:
             remove_interval = int(remove_interval)
         except (TypeError, ValueError):
@@ -242,9 +240,7 @@ class DampedVerlet(MolecularDynamics):
             sort_interval = int(sort_interval)
             if not isinstance(calc, ClusterDynamics):
                 raise InputError("atoms.calc", type(calc).__name__, "a ClusterDynamics calculator with sort_interval")
-            self._check_shuffle(atoms, "sort_interval=")
-            if "id" not in atoms.arrays:
-                atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
+            self._renumbering(atoms, "sort_interval=")
         self.sort_interval = sort_interval
         self._sort_scratch = None
         #: sorts of the Atoms done (:meth:`sort_atoms`)
@@ -295,11 +291,16 @@ class DampedVerlet(MolecularDynamics):
         self._drives()
 
     @staticmethod
-    def _check_shuffle(atoms, what):
+    def _renumbering(atoms, what, add_id=True):
+        """Ready the Atoms for runs that change particle indices (``what``: removals or sorts):
+        every constraint must follow them (``index_shuffle``), and an ``id`` array (``0..N-1``)
+        names the particles when the Atoms have none."""
         for c in atoms.constraints:
             if not hasattr(c, "index_shuffle"):
                 raise InputError("atoms.constraints", type(c).__name__,
                                  f"constraints that follow renumbered particles (index_shuffle) with {what}")
+        if add_id and "id" not in atoms.arrays:
+            atoms.new_array("id", np.arange(len(atoms), dtype=np.int64))
 
     def _drives(self):
         """The drives among the constraints, bound to this dynamics (binds new ones)."""
@@ -517,7 +518,7 @@ class DampedVerlet(MolecularDynamics):
         if (not isinstance(self.calc, ClusterDynamics) or nl is None or nl.perm_n is None or nl.ref_nc is None
                 or nl.ref_nc.shape[0] != n):
             return False
-        self._check_shuffle(atoms, "sort_atoms()")
+        self._renumbering(atoms, "sort_atoms()", add_id=False)
         if self.forces is None:
             self._refresh_properties()
         self._sort_scratch = scratch = grown(self._sort_scratch, n, (PERMUTE_WORDS,))
@@ -731,7 +732,7 @@ class DampedVerlet(MolecularDynamics):
         if "sort_interval" in st:
             iv = int(st["sort_interval"])
             if self.sort_interval is None:
-                self._check_shuffle(self.atoms, "sort_interval=")
+                self._renumbering(self.atoms, "sort_interval=")
                 self.sort_interval = iv
             elif iv != self.sort_interval:
                 raise InputError("sort_interval", self.sort_interval, f"the checkpoint's {iv}",

@@ -923,6 +923,18 @@ def _brick_pair_safe(a, b, mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, sk
     return bound <= max(skin, math.sqrt(s2) - rc)
 
 
+@njit(inline="always")
+def _brick_cube(o, g, k, full, n, periodic):
+    """Cube index of offset o along an axis of n cubes from cube g (every cube once when
+    ``full``, else g - k + o), wrapped along a periodic axis; -1 off an open axis' grid."""
+    h = o if full else g - k + o
+    if h < 0 or h >= n:
+        if not periodic:
+            return -1
+        h %= n
+    return h
+
+
 @njit(cache=True)
 def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, skey_b, sid_b, nb_c, csz_c, box_c, periodic_c, skin, rc,
                  maxreach):
@@ -937,7 +949,7 @@ def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, skey_b, sid_b, nb_c, csz_c, box
     middle c of the centres, the bound of any two bricks is at most 2E, so two bricks whose
     cubes (sides ``csz_c``, ``nb_c`` a side) are more than rc + 2E apart pass unseen; the
     others are found among the bricks sorted by cube key (``skey_b``, brick ids ``sid_b``), a
-    cursor per row of the neighbourhood.  False (a rebuild) when that reach exceeds
+    cursor per row of the neighbourhood (one brick per cube).  False (a rebuild) when that reach exceeds
     ``maxreach`` cubes along an axis."""
     nb = mid_b3.shape[0]
     lo = np.full(3, np.inf)
@@ -969,66 +981,39 @@ def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, skey_b, sid_b, nb_c, csz_c, box
         span[d] = nb_c[d] if full[d] else 2 * kk[d] + 1
     n1 = nb_c[1]
     n2 = nb_c[2]
-    w1 = span[1]
-    cur = np.full(span[0] * w1, -1, np.int64)
+    cur = np.full(span[0] * span[1], -1, np.int64)
     for u in range(nb):
         key = skey_b[u]
         a = sid_b[u]
-        g2 = key % n2
-        g1 = (key // n2) % n1
         g0 = key // (n2 * n1)
-        # ranges along the slowest two axes: every cube when the axis is periodic and the reach
-        # covers it (each once), else g -+ k (wrapped, or clipped to the grid)
-        r0a, r0b = (0, nb_c[0] - 1) if full[0] else (g0 - kk[0], g0 + kk[0])
-        r1a, r1b = (0, n1 - 1) if full[1] else (g1 - kk[1], g1 + kk[1])
-        for h0 in range(r0a, r0b + 1):
-            c0 = h0
-            if c0 < 0 or c0 >= nb_c[0]:
-                if not periodic_c[0]:
+        g1 = (key // n2) % n1
+        g2 = key % n2
+        for o0 in range(span[0]):
+            c0 = _brick_cube(o0, g0, kk[0], full[0], nb_c[0], periodic_c[0])
+            if c0 < 0:
+                continue
+            for o1 in range(span[1]):
+                c1 = _brick_cube(o1, g1, kk[1], full[1], n1, periodic_c[1])
+                if c1 < 0:
                     continue
-                c0 %= nb_c[0]
-            for h1 in range(r1a, r1b + 1):
-                c1 = h1
-                if c1 < 0 or c1 >= n1:
-                    if not periodic_c[1]:
+                q = -1
+                prev = -1
+                for o2 in range(span[2]):
+                    c2 = _brick_cube(o2, g2, kk[2], full[2], n2, periodic_c[2])
+                    if c2 < 0:
                         continue
-                    c1 %= n1
-                row = (h0 - r0a) * w1 + (h1 - r1a)
-                base = (c0 * n1 + c1) * n2
-                # the fastest axis: one range of keys, or two where it wraps a periodic face
-                for part in range(2):
-                    if full[2]:
-                        if part:
-                            break
-                        x0, x1 = 0, n2 - 1
-                    else:
-                        x0 = g2 - kk[2]
-                        x1 = g2 + kk[2]
-                        if periodic_c[2]:
-                            if part == 0:
-                                if x0 < 0:
-                                    x0, x1 = x0 + n2, n2 - 1
-                                elif x1 >= n2:
-                                    x1 = n2 - 1
-                            else:
-                                if g2 - kk[2] < 0:
-                                    x0, x1 = 0, g2 + kk[2]
-                                elif g2 + kk[2] >= n2:
-                                    x0, x1 = 0, g2 + kk[2] - n2
-                                else:
-                                    break
-                        else:
-                            if part:
-                                break
-                            x0 = max(x0, 0)
-                            x1 = min(x1, n2 - 1)
-                    q = _lower(skey_b, base + x0, cur, row)
-                    while q < nb and skey_b[q] <= base + x1:
+                    target = (c0 * n1 + c1) * n2 + c2
+                    if q < 0 or target < prev:          # a row's first cube, or past a periodic face
+                        q = _lower(skey_b, target, cur, o0 * span[1] + o1)
+                    else:                               # the next cube along the row: walk on
+                        while q < nb and skey_b[q] < target:
+                            q += 1
+                    prev = target
+                    if q < nb and skey_b[q] == target:
                         b = sid_b[q]
                         if b > a and not _brick_pair_safe(a, b, mid_b3, rad_b2, blo_b3, bhi_b3, box_c,
                                                           periodic_c, skin, rc):
                             return False
-                        q += 1
     return True
 
 
@@ -1535,8 +1520,9 @@ class NeighborList:
         arrs = [self._ref_store, self._pool, self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
         arrs += list(self._store) if self._store is not None else [self.first_n]
         arrs.append(self._key_store)
-        if self._bricks is not None:
-            arrs += [a for a in self._bricks if isinstance(a, np.ndarray)]
+        if self._bricks is not None:          # the brick store's arrays, and those made per build
+            arrs += list(self._brick_store)
+            arrs += [a for a in self._bricks[3:] if isinstance(a, np.ndarray)]
         return int(sum(a.nbytes for a in arrs if a is not None))
 
     def sorted_positions(self, positions, out=None):
