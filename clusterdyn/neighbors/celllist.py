@@ -273,11 +273,14 @@ RADIX_BITS = 11
 
 
 @njit(cache=True)
-def _radix_sort(key, perm):
-    """Stable LSD radix sort of the keys ``key`` (>= 0; used as scratch) into ``perm``; returns
-    the occupied cells ``(ukey, ustart)``."""
+def _radix_sort(key, perm, scr):
+    """Stable LSD radix sort of the keys ``key`` (>= 0) into ``perm``; returns the occupied cells
+    ``(ukey, ustart)``.  Allocates nothing of N's size but ``ustart``: the passes go back and
+    forth between (``key``, ``perm``) and two halves of ``scr`` (at least 2 N int64; the caller
+    lends the wrap offsets' buffer, written only after the sort), and ``ukey`` is a view of
+    ``key`` (the distinct keys, compacted at its start), valid until ``key`` is written again."""
     n = key.shape[0]
-    idx = np.empty(n, np.int64)
+    idx = perm
     kmax = 0
     for i in range(n):
         idx[i] = i
@@ -285,8 +288,8 @@ def _radix_sort(key, perm):
     nbits = 0
     while nbits < 63 and (kmax >> nbits) > 0:
         nbits += 1
-    key2 = np.empty(n, np.int64)
-    idx2 = np.empty(n, np.int64)
+    key2 = scr[:n]
+    idx2 = scr[n:2 * n]
     nd = 1 << RADIX_BITS
     mask = nd - 1
     count = np.empty(nd + 1, np.int64)
@@ -310,17 +313,20 @@ def _radix_sort(key, perm):
     for k in range(n):
         if k == 0 or key[k] != key[k - 1]:
             m += 1
-    ukey = np.empty(m, np.int64)
     ustart = np.empty(m + 1, np.int64)
+    out = key2 if sh // RADIX_BITS % 2 == 1 else key     # the caller's key array
     q = 0
+    last = -1
     for k in range(n):
-        if k == 0 or key[k] != key[k - 1]:
-            ukey[q] = key[k]
+        c = key[k]
+        if k == 0 or c != last:
+            out[q] = c                      # q <= k: in place when out is key
             ustart[q] = k
             q += 1
+        last = c
         perm[k] = idx[k]
     ustart[m] = n
-    return ukey, ustart
+    return out[:m], ustart
 
 
 def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n, sparse):
@@ -333,7 +339,7 @@ def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, x
     The keys (into the scratch ``key_n``) and the gather run in parallel, the sort in one thread."""
     _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
     if sparse:
-        ukey, ustart = _radix_sort(key_n, perm)
+        ukey, ustart = _radix_sort(key_n, perm, offs_nc.reshape(-1).view(np.int64))
         dstart = np.empty(0, np.int64)
     else:
         ukey, ustart, dstart = _count_sort(key_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
