@@ -85,7 +85,7 @@ def worker_cd(a):
     atoms, dyn, extra = load_state(a.state, J=J)
     dyn.run(2)                      # kernels from the on-disk cache, first forces
     if a.sort_interval:
-        dyn.sort_interval = a.sort_interval     # sort the Atoms as LAMMPS does by default (atom_modify sort)
+        dyn.set_sort_interval(a.sort_interval)   # sort the Atoms as LAMMPS does by default (atom_modify sort)
         dyn.sort_atoms()
     n = len(atoms)
     gc.collect()

@@ -230,18 +230,7 @@ class DampedVerlet(MolecularDynamics):
             raise InputError("remove_interval", remove_interval, "a positive number of steps") from None
         if remove_interval < 1:
             raise InputError("remove_interval", remove_interval, "a positive number of steps")
-        if sort_interval is not None:
-            try:
-                ok = int(sort_interval) == sort_interval and int(sort_interval) >= 1
-            except (TypeError, ValueError):
-                ok = False
-            if not ok:
-                raise InputError("sort_interval", sort_interval, "a positive whole number of steps, or None")
-            sort_interval = int(sort_interval)
-            if not isinstance(calc, ClusterDynamics):
-                raise InputError("atoms.calc", type(calc).__name__, "a ClusterDynamics calculator with sort_interval")
-            self._renumbering(atoms, "sort_interval=")
-        self.sort_interval = sort_interval
+        self.sort_interval = self._sort_interval(atoms, sort_interval)
         self._sort_scratch = None
         #: sorts of the Atoms done (:meth:`sort_atoms`)
         self.nsorts = 0
@@ -289,6 +278,28 @@ class DampedVerlet(MolecularDynamics):
         self._dissipation = 0.0
         self._ledger0 = None
         self._drives()
+
+    @classmethod
+    def _sort_interval(cls, atoms, interval):
+        """``interval`` checked (a positive whole number of steps, or None) and the Atoms readied
+        for sorts (:meth:`_renumbering`); returns it as an int, or None."""
+        if interval is None:
+            return None
+        try:
+            ok = int(interval) == interval and int(interval) >= 1
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InputError("sort_interval", interval, "a positive whole number of steps, or None")
+        if not isinstance(atoms.calc, ClusterDynamics):
+            raise InputError("atoms.calc", type(atoms.calc).__name__, "a ClusterDynamics calculator with sort_interval")
+        cls._renumbering(atoms, "sort_interval=")
+        return int(interval)
+
+    def set_sort_interval(self, interval):
+        """Sort the Atoms every ``interval`` steps from now on (None: never), as the
+        ``sort_interval`` argument does (checked the same way)."""
+        self.sort_interval = self._sort_interval(self.atoms, interval)
 
     @staticmethod
     def _renumbering(atoms, what, add_id=True):
@@ -732,8 +743,7 @@ class DampedVerlet(MolecularDynamics):
         if "sort_interval" in st:
             iv = int(st["sort_interval"])
             if self.sort_interval is None:
-                self._renumbering(self.atoms, "sort_interval=")
-                self.sort_interval = iv
+                self.set_sort_interval(iv)
             elif iv != self.sort_interval:
                 raise InputError("sort_interval", self.sort_interval, f"the checkpoint's {iv}",
                                  hint="a restart keeps the run's sort interval")

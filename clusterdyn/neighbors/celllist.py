@@ -280,6 +280,7 @@ def _radix_sort(key, perm, scr):
     lends the wrap offsets' buffer, written only after the sort), and ``ukey`` is a view of
     ``key`` (the distinct keys, compacted at its start), valid until ``key`` is written again."""
     n = key.shape[0]
+    key0 = key
     idx = perm
     kmax = 0
     for i in range(n):
@@ -314,13 +315,13 @@ def _radix_sort(key, perm, scr):
         if k == 0 or key[k] != key[k - 1]:
             m += 1
     ustart = np.empty(m + 1, np.int64)
-    out = key2 if sh // RADIX_BITS % 2 == 1 else key     # the caller's key array
+    out = key0
     q = 0
     last = -1
     for k in range(n):
         c = key[k]
         if k == 0 or c != last:
-            out[q] = c                      # q <= k: in place when out is key
+            out[q] = c                      # q <= k: in place when the sorted keys are key0
             ustart[q] = k
             q += 1
         last = c
