@@ -132,6 +132,49 @@ def slab_rate(a, state):
     return json.loads(p.stdout.strip().split("\n")[-1])
 
 
+class MemoryTrace:
+    """Where in a chunk its peak memory was reached: read after every step (an observer; about 20 us
+    a step), each rise of the peak by more than ``RISE`` bytes a particle is kept with what the step
+    did (a list build, a sort of the Atoms, a removal), and the chunk's largest ones go to
+    ``debris_cloud_<run>_memory.csv`` (chunk, step, peak B/particle, rise, events)."""
+
+    RISE = 2.0
+    KEEP = 5
+
+    def __init__(self, path, dyn, nl, base, n0, resume):
+        self.path, self.dyn, self.nl, self.base, self.n0 = path, dyn, nl, base, n0
+        if not (resume and path.exists()):
+            with open(path, "w", newline="") as fh:
+                csv.writer(fh).writerow(["chunk", "step", "peak_bytes_per_particle", "rise", "events"])
+
+    def start_chunk(self):
+        self.last = (status("VmHWM") - self.base) / self.n0
+        self.builds, self.n = self.nl.nbuilds, len(self.dyn.atoms)
+        self.rises = []
+
+    def __call__(self):
+        peak = (status("VmHWM") - self.base) / self.n0
+        ev = []
+        if self.nl.nbuilds != self.builds:
+            ev.append("build")
+        if len(self.dyn.atoms) != self.n:
+            ev.append("removal")
+        si = self.dyn.sort_interval
+        if si and self.dyn.nsteps % si == 0:
+            ev.append("sort")
+        if peak > self.last + self.RISE:
+            self.rises.append((self.dyn.nsteps, peak, peak - self.last, "+".join(ev) or "-"))
+        self.last = max(self.last, peak)
+        self.builds, self.n = self.nl.nbuilds, len(self.dyn.atoms)
+
+    def end_chunk(self, chunk):
+        top = sorted(self.rises, key=lambda r: -r[1])[:self.KEEP]
+        with open(self.path, "a", newline="") as fh:
+            w = csv.writer(fh)
+            for step, peak, rise, ev in sorted(top):
+                w.writerow([chunk, step, f"{peak:.1f}", f"{rise:.1f}", ev])
+
+
 def _keep_steps(out, growth):
     """Steps of the finished ``keep`` run (the ``remove`` run covers the same time; the two may run
     at the same time, in two processes), or a huge number while it runs."""
@@ -173,9 +216,12 @@ def worker_run(a):
     slab_state = shock_state(max(1, round(n0 / 1024)), a.slab_fraction)
     print(f"[{a.run}] N = {n0}, dt = {dyn.dt / units.fs:.4g} fs, initial box {np.round(ext0 / r0, 1)} r0",
           flush=True)
+    trace = MemoryTrace(out.parent / f"debris_cloud_{a.run}_memory.csv", dyn, nl, base, n0, a.resume)
+    dyn.attach(trace, interval=1)
     while True:
         nb0, ns0 = nl.nbuilds, nl.nlocal
         n_start = len(atoms)
+        trace.start_chunk()
         t0, c0 = time.perf_counter(), time.process_time()
         dyn.run(a.chunk)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -186,6 +232,7 @@ def worker_run(a):
         grow = float(ext.max() / ext0.max())
         vol = float(np.prod(ext) / np.prod(ext0))
         peak_run = (status("VmHWM") - base) / n0
+        trace.end_chunk(chunk)
         reset_peak()
         save_run(ck, dyn, extra={"ext0": ext0.tolist(), "chunk": chunk})
         peak_ck = (status("VmHWM") - base) / n0

@@ -241,21 +241,24 @@ def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc):
 @njit(cache=True)
 def _count_sort(cell_n, ncell, perm):
     """Stable counting sort of the keys ``cell_n`` (< ncell) into ``perm``; returns the occupied
-    cells ``(ukey, ustart)`` and the dense row starts (ncell + 1)."""
+    cells ``(ukey, ustart)`` and the dense row starts (ncell + 1).  One array of the grid's size
+    (up to :data:`DENSE_CELLS_PER_PARTICLE` x 8 bytes a particle): the cells' ends, counted down
+    to their starts by a backward fill (which keeps equal keys in their order)."""
     n = cell_n.shape[0]
-    start = np.zeros(ncell + 1, np.int64)
+    end = np.zeros(ncell + 2, np.int64)     # end[c + 1]: rows up to the end of cell c
     for i in range(n):
-        start[cell_n[i] + 1] += 1
+        end[cell_n[i] + 1] += 1
     m = 0
     for c in range(ncell):
-        if start[c + 1] > 0:
+        if end[c + 1] > 0:
             m += 1
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    for i in range(n):
-        c = cell_n[i]
-        perm[fill[c]] = i
-        fill[c] += 1
+        end[c + 1] += end[c]
+    for i in range(n - 1, -1, -1):
+        c = cell_n[i] + 1
+        end[c] -= 1
+        perm[end[c]] = i
+    end[ncell + 1] = n
+    start = end[1:]                         # start[c]: first row of cell c; start[ncell] = n
     ukey = np.empty(m, np.int64)
     ustart = np.empty(m + 1, np.int64)
     q = 0
@@ -1320,6 +1323,17 @@ class NeighborList:
                         np.empty((nt, m, 6)), np.empty((m, 3)), np.empty((m, 3)), np.empty((nt, m, 2)),
                         np.empty((m, 2)), bkey[:m][order], order.astype(np.int64), nb_c, csz)
 
+    def _reserve_pool(self, size):
+        """A pair pool of at least ``size`` entries (a build rewrites all of it).  When it must grow,
+        the old pool and the list's view of it are let go first, so the two are never held together
+        (they would add about 35 bytes a particle to the peak), and it grows by a eighth more than
+        asked, so that a slowly densifying sample does not reallocate at every build."""
+        if self._pool.shape[0] >= size:
+            return
+        self.jp_p = None
+        self._pool = np.empty(0, np.uint32)
+        self._pool = np.empty(size + size // 8, np.uint32)
+
     def _image_table(self, krange, box):
         kx, ky, kz = krange
         ii = np.arange(-kx, kx + 1)
@@ -1423,8 +1437,7 @@ class NeighborList:
         while True:
             slab = np.zeros(nblk + 1, np.int64)
             np.cumsum(est, out=slab[1:])
-            if self._pool.shape[0] < slab[-1]:
-                self._pool = np.empty(int(slab[-1]), np.uint32)
+            self._reserve_pool(int(slab[-1]))
             need_b = np.empty(nblk, np.int64)
             m = _fill_slabs(xs, ukey, ustart, dstart, sparse, nslot, periodic_s, HALF_RUNS, slotbox, slotmult,
                             rcut * rcut, cap, HALF_SHIFT, cblk, slab, maxrows, self._pool, first_n, need_b)
@@ -1468,8 +1481,7 @@ class NeighborList:
         if n > 2 ** shift:
             raise InputError("positions", f"{n} particles", f"at most 2**{shift} with {nimg} periodic images "
                              "(a box thinner than two cut-offs along a periodic axis)")
-        if self._pool.shape[0] < npairs:
-            self._pool = np.empty(npairs, np.uint32)
+        self._reserve_pool(npairs)
         _pack(j_p, img_p, shift, self._pool)
         self.jp_p = self._pool[:npairs]
         self.img_shift = shift

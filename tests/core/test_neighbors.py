@@ -165,6 +165,35 @@ def test_list_memory_does_not_grow_with_the_bounding_box():
     assert nl3.npairs == pairs
 
 
+def test_a_growing_pair_pool_is_never_held_twice():
+    """A build that needs a larger pair pool lets the old one go before it allocates the new one:
+    the traced peak of that build stays below (memory before) + (new pool) - (old pool) / 2, where
+    holding both would reach (memory before) + (new pool); and the list is that of a fresh list."""
+    import tracemalloc
+    atoms = fcc_packing("Al", 1.0, size=(14, 14, 14), pbc=False)
+    pos = atoms.positions * 1.25            # dilute: few pairs, a small pool
+    NeighborList(1.15, 0.25, half=True, sort=True, centered=True).build(pos, atoms.cell.array, False)  # code
+    nl = NeighborList(1.15, 0.25, half=True, sort=True, centered=True)
+    tracemalloc.start()
+    try:
+        nl.build(pos, atoms.cell.array, False)
+        old = nl._pool.nbytes
+        dense = atoms.positions * 0.8       # every cluster gains neighbours: the pool must grow
+        tracemalloc.reset_peak()
+        before = tracemalloc.get_traced_memory()[0]
+        nl.build(dense, atoms.cell.array, False)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    new = nl._pool.nbytes
+    assert new > 1.5 * old
+    assert peak < before + new - 0.5 * old
+    fresh = NeighborList(1.15, 0.25, half=True, sort=True, centered=True)
+    fresh.build(dense, atoms.cell.array, False)       # the list of a list that never had a pool
+    assert all(np.array_equal(a, b) for a, b in zip((nl.perm_n, nl.first_n, nl.jp_p),
+                                                    (fresh.perm_n, fresh.first_n, fresh.jp_p)))
+
+
 def _listed_pairs(nl, pos, rc):
     ii, jj, dd, rr = nl.pairs(pos)
     k = rr < rc
