@@ -259,6 +259,7 @@ class ClusterDynamics(Calculator):
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["boff"][-1])
             if lay["f_m3"].shape[0] < m:
+                lay["f_m3"] = None          # let the old buffer go first: never both held
                 lay["f_m3"] = np.empty((m + m // 8, 3))
                 lay["e_m1"], lay["w_m6"] = self._NO_PP1, self._NO_PP6
             lay["key"] = nl.nbuilds
@@ -278,7 +279,7 @@ class ClusterDynamics(Calculator):
 
     # -- the pair loop ---------------------------------------------------------
     def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True,
-                energy=True, kick=None):
+                energy=True, kick=None, forces=True):
         """Run the pair loop on ``atoms`` (no copy).  Returns a dict of results.
 
         ``damping = (momenta_nc, invmass_n, eta_tt)`` selects the fused damped
@@ -289,7 +290,8 @@ class ClusterDynamics(Calculator):
         ``"energy"`` is then None).  With damping the energy takes a second,
         conservative pass.  ``kick = (momenta_nc, h)`` adds ``h * forces`` to
         the momenta in the passes that write the forces (the dynamics' second
-        half kick).  Raises InstabilityError if a pair is closer than the
+        half kick).  ``forces=False`` (without damping or kick): the energy
+        and virials only, no (N, 3) array made or written (``"forces"`` is None).  Raises InstabilityError if a pair is closer than the
         tabulated range (the step has failed then: the rows the pair loop wrote
         itself may have had their kick).
 
@@ -298,6 +300,8 @@ class ClusterDynamics(Calculator):
         virial, per-particle energies and virials; each is a separately
         compiled loop without the terms it does not use.
         """
+        if not forces and (damping is not None or kick is not None or out is not None):
+            raise InputError("forces", forces, "True when damping, kick or out is given")
         self.setup(atoms)
         n = len(atoms)
         pos = atoms.arrays["positions"]
@@ -330,7 +334,8 @@ class ClusterDynamics(Calculator):
         else:
             mode = "forces"
         stat, vir = lay["stat_k"], lay["vir_k6"]
-        forces = np.empty((n, 3)) if out is None else out
+        want = forces
+        forces = self._NO_V if not want else np.empty((n, 3)) if out is None else out
         # the step kernels (forces only, damped or not) write the rows no other chunk touches
         # themselves, with the half kick; reduce_shared sums the rest
         fin = mode in ("forces", "damped")
@@ -363,9 +368,9 @@ class ClusterDynamics(Calculator):
             use_threads(lay["shared_r"].shape[0])
             K.reduce_shared(lay["f_m3"], *red, lay["shared_r"], lay["owner_r"], forces, p_kick, h)
             use_threads(n)
-        else:
+        elif want:
             K.reduce_rows(lay["f_m3"], *red, forces, p_kick, h)
-        res = {"forces": forces, "energy": None if fin else float(stat[:, 0].sum())}
+        res = {"forces": forces if want else None, "energy": None if fin else float(stat[:, 0].sum())}
         if damping is not None:
             res["dissipation"] = float(stat[:, 5].sum())     # eV per ASE time, >= 0
         if mode in ("virial", "per_particle"):
@@ -378,7 +383,7 @@ class ClusterDynamics(Calculator):
             K.reduce_rows(lay["w_m6"], *red, w, self._NO_V, 0.0)
             res["virials"] = w
         if mode == "damped" and energy:
-            res["energy"] = self.compute(atoms, step=step, virial=False)["energy"]
+            res["energy"] = self.compute(atoms, step=step, virial=False, forces=False)["energy"]
         return res
 
     _NO_ETA = np.zeros((0, 0))

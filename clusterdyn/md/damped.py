@@ -20,7 +20,7 @@ from ase.md.md import MolecularDynamics
 
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
-from ..buffers import PERMUTE_WORDS, grown, permute
+from ..buffers import grown, permute
 from ..parallel import use_threads
 from . import _integrate as I
 from .drives import Drive, _Layer
@@ -231,7 +231,6 @@ class DampedVerlet(MolecularDynamics):
         if remove_interval < 1:
             raise InputError("remove_interval", remove_interval, "a positive number of steps")
         self.sort_interval = self._sort_interval(atoms, sort_interval)
-        self._sort_scratch = None
         #: sorts of the Atoms done (:meth:`sort_atoms`)
         self.nsorts = 0
         self.region = region
@@ -269,7 +268,6 @@ class DampedVerlet(MolecularDynamics):
         self._epot = None
         self._eta = calc.damping_matrix(J) if J is not None else None
         self._fbuf = None
-        self._fturn = 0
         self._safe = {}
         self.timings = {"forces": 0.0, "integrate": 0.0}
         #: energy the pair damping has removed, eV (dt times the dissipated power
@@ -339,6 +337,21 @@ class DampedVerlet(MolecularDynamics):
             d.update({"region": self.region.todict(), "remove_interval": self.remove_interval})
         return d
 
+    @property
+    def masses(self):
+        """The Atoms' masses as a column ((N, 1), amu): ASE's MolecularDynamics attribute, made
+        when asked (the integrator keeps only the inverse masses, so a sort or a removal has one
+        array fewer to follow)."""
+        return self.atoms.get_masses()[:, None]
+
+    @masses.setter
+    def masses(self, value):
+        # ASE's MolecularDynamics.__init__ sets it from the Atoms: accepted when it is theirs
+        m = self.atoms.get_masses()
+        if np.shape(value) not in (m.shape, (m.shape[0], 1)) or not np.array_equal(np.ravel(value), m):
+            raise InputError("masses", "an array other than the Atoms' masses",
+                             "the Atoms' masses (DampedVerlet integrates with atoms.get_masses(): set them there)")
+
     def _invm(self):
         m = self.atoms.get_masses()
         if np.any(m <= 0):
@@ -362,12 +375,11 @@ class DampedVerlet(MolecularDynamics):
             damping = None
             if self._eta is not None:
                 damping = (atoms.arrays["momenta"], self._invm_n, self._eta)
-            # two force buffers taking turns: the forces of the previous step stay valid (they grow,
-            # never shrink: removing particles takes views of them)
+            # one force buffer, rewritten at each step (nothing reads the old forces once the first
+            # half kick is done); it grows, never shrinks: removing particles takes a view of it
             n = len(atoms)
-            self._fbuf = [grown(b, n) for b in (self._fbuf or (None, None))]
-            self._fturn ^= 1
-            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[self._fturn][:n],
+            self._fbuf = grown(self._fbuf, n)
+            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[:n],
                                     virial=False, energy=False,
                                     kick=None if kick is None else (atoms.arrays["momenta"], kick))
             forces = out["forces"]
@@ -392,7 +404,7 @@ class DampedVerlet(MolecularDynamics):
     @property
     def potential_energy(self):
         if self._epot is None and self.forces is not None and isinstance(self.calc, ClusterDynamics):
-            self._epot = (self.calc.compute(self.atoms, step=self.nsteps, virial=False)["energy"]
+            self._epot = (self.calc.compute(self.atoms, step=self.nsteps, virial=False, forces=False)["energy"]
                           + self._constraint_energy())
         return self._epot
 
@@ -448,7 +460,8 @@ class DampedVerlet(MolecularDynamics):
             self.forces = self._compute_forces()
 
     def step(self, forces=None):
-        """One velocity-Verlet step (returns the forces at the new positions).
+        """One velocity-Verlet step; returns the forces at the new positions (with ClusterDynamics
+        the dynamics' own buffer, rewritten by the next step: copy it to keep it).
 
         With the ClusterDynamics calculator and drives of
         :mod:`clusterdyn.md.drives` only (any mix of pistons, walls and
@@ -516,8 +529,8 @@ class DampedVerlet(MolecularDynamics):
         New particle k is the particle of the list's sorted row k: every array of
         the Atoms, the constraints' indices, the forces and the list's own
         per-particle state (reference positions, bricks) are permuted in place
-        (nothing of N's size is allocated beyond a scratch of 8 bytes a particle
-        kept for the next sort), and the list stays valid: no rebuild, and the steps until
+        (nothing of N's size is allocated: the scratch is the list's, free between
+        builds, :meth:`NeighborList.scratch`), and the list stays valid: no rebuild, and the steps until
         the next build are the same bit for bit (in ``id`` order) as without
         the sort.  The next build's cell sort is stable in the new order, so
         from there the pair sums may add in another order (rounding).  False
@@ -532,7 +545,7 @@ class DampedVerlet(MolecularDynamics):
         self._renumbering(atoms, "sort_atoms()", add_id=False)
         if self.forces is None:
             self._refresh_properties()
-        self._sort_scratch = scratch = grown(self._sort_scratch, n, (PERMUTE_WORDS,))
+        scratch = nl.scratch(n)             # the list's key scratch: free between builds
         order = nl.perm_n                   # new particle k: the list's sorted row k
         cons = list(atoms.constraints)
         atoms.set_constraint()
@@ -544,7 +557,6 @@ class DampedVerlet(MolecularDynamics):
         for a in (self.forces, self._invm_n):
             if a is not None and a.shape[0] == n:
                 permute(a, order, scratch)
-        self.masses = atoms.get_masses()[:, None]
         self.calc.renumbered(order)
         nl.renumber(scratch)
         self.nsorts += 1
@@ -588,7 +600,6 @@ class DampedVerlet(MolecularDynamics):
         atoms.set_constraint(cons)
         if atoms.calc is not None and hasattr(atoms.calc, "reset"):
             atoms.calc.reset()
-        self.masses = atoms.get_masses()[:, None]
         self._invm_n = self._invm()
         self._epot = None
         self.forces = self._compute_forces()

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ..buffers import grown, permute
+from ..buffers import PERMUTE_WORDS, grown, permute
 from ..errors import InputError
 from ..parallel import STREAM_BLOCK as BLOCK, blocks_max, max_take, use_threads
 
@@ -1529,6 +1529,13 @@ class NeighborList:
         if self._bricks is not None:
             permute(self._bricks[0], self.perm_n, scratch)
         _identity(self.perm_n)
+
+    def scratch(self, n):
+        """A scratch of ``n`` rows of :data:`~clusterdyn.buffers.PERMUTE_WORDS` float64 words for
+        :func:`clusterdyn.buffers.permute` (and :meth:`renumber`) between builds: the builds' key
+        scratch, whose contents matter only inside a build, so a caller's sort of its particles
+        holds no memory of its own.  Valid until the next build."""
+        return self._keys(n * PERMUTE_WORDS).view(np.float64).reshape(n, PERMUTE_WORDS)
 
     @property
     def npairs(self):

@@ -360,7 +360,7 @@ class ProfiledShockScene(SceneDef):
 
         def probe_obs():
             if not probe.done:
-                probe.sample(dyn.get_time(), atoms, calc.compute(atoms, per_particle=True)["virials"])
+                probe.sample(dyn.get_time(), atoms, calc.compute(atoms, per_particle=True, forces=False)["virials"])
 
         def frame(d):
             rec.add(d.get_time(), atoms)

@@ -402,7 +402,7 @@ def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", trac
         tracker = shock_tracker(setup, atoms.positions[~setup.piston_mask, setup.axis].min())
 
     def frame(dyn):
-        out = calc.compute(atoms, per_particle=True)
+        out = calc.compute(atoms, per_particle=True, forces=False)
         pist = atoms.positions[setup.piston_mask, setup.axis].max()
         tracker.add(dyn.get_time(), atoms, out["virials"], pist, exclude=setup.piston_mask)
         if on_frame is not None:
@@ -539,7 +539,7 @@ def shock_stage(name, atoms, dyn, info, material, frames):
     ax = setup.axis
 
     def frame(d):
-        out = calc.compute(atoms, per_particle=True)
+        out = calc.compute(atoms, per_particle=True, forces=False)
         tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
 
     others = [k for k in range(3) if k != ax]

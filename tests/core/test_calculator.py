@@ -92,6 +92,27 @@ def test_cache_sees_material_changes_and_computes_only_what_is_asked():
     assert "energies" in calc.results
 
 
+def test_energy_without_forces_is_the_same_pass():
+    """``compute(forces=False)``: the same energy and per-particle virials as with forces, no
+    forces made; refused with damping, a kick or an output array."""
+    atoms = two_material_sample(300)
+    calc = ClusterDynamics()
+    atoms.calc = calc
+    for pp in (False, True):
+        full = calc.compute(atoms, per_particle=pp)
+        lean = calc.compute(atoms, per_particle=pp, forces=False)
+        assert lean["forces"] is None and full["forces"].shape == (300, 3)
+        assert lean["energy"] == full["energy"] and np.array_equal(lean["virial"], full["virial"])
+        if pp:
+            assert np.array_equal(lean["virials"], full["virials"])
+            assert np.array_equal(lean["energies"], full["energies"])
+    p = atoms.get_momenta()
+    for kw in ({"out": np.empty((300, 3))}, {"kick": (p, 1.0)},
+               {"damping": (p, 1 / atoms.get_masses(), calc.damping_matrix(50))}):
+        with pytest.raises(InputError, match="forces"):
+            calc.compute(atoms, forces=False, **kw)
+
+
 def test_works_in_ase_fire():
     atoms = fcc_packing("Al", R0, size=(2, 2, 2), pbc=True)
     atoms.positions += np.random.default_rng(3).normal(0, 0.05 * R0, atoms.positions.shape)

@@ -150,14 +150,14 @@ def test_removal_moves_rows_in_place_and_allocates_no_new_arrays():
     before = {k: v for k, v in atoms.arrays.items()}
     copies = {k: v.copy() for k, v in atoms.arrays.items()}
     nl = atoms.calc.nl
-    stores = [nl._store[0], nl._ref_store, dyn._fbuf[0], dyn._fbuf[1]]
+    stores = [nl._store[0], nl._ref_store, dyn._fbuf]
     inside = region.inside(atoms.positions)
     assert 0 < (~inside).sum() <= len(out)
     assert dyn.remove_outside() == (~inside).sum()
     keep = np.flatnonzero(inside)
     for k, v in atoms.arrays.items():
         assert np.shares_memory(v, before[k]) and np.array_equal(v, copies[k][keep]), k
-    assert all(np.shares_memory(a, b) for a, b in zip(stores, [nl.xs_nc, nl.ref_nc, *dyn._fbuf]))
+    assert all(np.shares_memory(a, b) for a, b in zip(stores, [nl.xs_nc, nl.ref_nc, dyn.forces]))
     assert nl.xs_nc.shape[0] == len(atoms) == keep.size
     ref = atoms.copy()
     ref.calc = ClusterDynamics()

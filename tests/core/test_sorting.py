@@ -104,6 +104,21 @@ def test_sort_interval_refused_when_it_cannot_follow():
         DampedVerlet(other, J=None, timestep=1.0, sort_interval=10)
 
 
+def test_sort_holds_no_scratch_and_masses_follow_the_atoms():
+    """A sort borrows the list's key scratch (the dynamics keeps no array of its own for it), and
+    ``dyn.masses`` (ASE's attribute) is the sorted Atoms' masses; another array is refused."""
+    atoms, dyn = _sample(sort_interval=7)
+    atoms.arrays["masses"] = atoms.get_masses() * (1 + 0.01 * np.arange(len(atoms)) / len(atoms))
+    dyn.run(7)
+    assert dyn.nsorts == 1
+    held = [k for k, v in vars(dyn).items() if isinstance(v, np.ndarray) and v.ndim and v.shape[0] >= len(atoms)]
+    assert sorted(held) == ["_fbuf", "_invm_n", "forces"]
+    assert np.array_equal(dyn.masses[:, 0], atoms.get_masses()) and dyn.masses.shape == (len(atoms), 1)
+    dyn.masses = atoms.get_masses()
+    with pytest.raises(InputError, match="masses"):
+        dyn.masses = 2 * atoms.get_masses()
+
+
 def _brute(mid, rad, blo, bhi, box, periodic, skin, rc):
     for a in range(mid.shape[0]):
         if not rad[a, 0] + rad[a, 1] <= skin:
