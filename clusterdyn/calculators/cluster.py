@@ -290,8 +290,9 @@ class ClusterDynamics(Calculator):
         ``"energy"`` is then None).  With damping the energy takes a second,
         conservative pass.  ``kick = (momenta_nc, h)`` adds ``h * forces`` to
         the momenta in the passes that write the forces (the dynamics' second
-        half kick).  ``forces=False`` (without damping or kick): the energy
-        and virials only, no (N, 3) array made or written (``"forces"`` is None).  Raises InstabilityError if a pair is closer than the
+        half kick).  ``forces=False`` (without damping, kick or out): the
+        energy and virials only, no (N, 3) array made or written (``"forces"``
+        is None).  Raises InstabilityError if a pair is closer than the
         tabulated range (the step has failed then: the rows the pair loop wrote
         itself may have had their kick).
 
@@ -334,15 +335,14 @@ class ClusterDynamics(Calculator):
         else:
             mode = "forces"
         stat, vir = lay["stat_k"], lay["vir_k6"]
-        want = forces
-        forces = self._NO_V if not want else np.empty((n, 3)) if out is None else out
+        f_nc = self._NO_V if not forces else np.empty((n, 3)) if out is None else out
         # the step kernels (forces only, damped or not) write the rows no other chunk touches
         # themselves, with the half kick; reduce_shared sums the rest
         fin = mode in ("forces", "damped")
         p_kick, h = (self._NO_V, 0.0) if kick is None else (kick[0], float(kick[1]))
         args = (xs, types_s, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, self.gtab, self.coef, self.meta,
                 lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"],
-                perm, bonds, ids, initial, lay["shared_n"], forces, p_kick, h)
+                perm, bonds, ids, initial, lay["shared_n"], f_nc, p_kick, h)
         K.KERNELS[multi, mode](*args)
         for c in (2, 3):
             for k in range(stat.shape[0]):
@@ -366,11 +366,11 @@ class ClusterDynamics(Calculator):
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
         if fin:
             use_threads(lay["shared_r"].shape[0])
-            K.reduce_shared(lay["f_m3"], *red, lay["shared_r"], lay["owner_r"], forces, p_kick, h)
+            K.reduce_shared(lay["f_m3"], *red, lay["shared_r"], lay["owner_r"], f_nc, p_kick, h)
             use_threads(n)
-        elif want:
-            K.reduce_rows(lay["f_m3"], *red, forces, p_kick, h)
-        res = {"forces": forces if want else None, "energy": None if fin else float(stat[:, 0].sum())}
+        elif forces:
+            K.reduce_rows(lay["f_m3"], *red, f_nc, p_kick, h)
+        res = {"forces": f_nc if forces else None, "energy": None if fin else float(stat[:, 0].sum())}
         if damping is not None:
             res["dissipation"] = float(stat[:, 5].sum())     # eV per ASE time, >= 0
         if mode in ("virial", "per_particle"):

@@ -1326,7 +1326,7 @@ class NeighborList:
     def _reserve_pool(self, size):
         """A pair pool of at least ``size`` entries (a build rewrites all of it).  When it must grow,
         the old pool and the list's view of it are let go first, so the two are never held together
-        (they would add about 35 bytes a particle to the peak), and it grows by a eighth more than
+        (they would add about 35 bytes a particle to the peak), and it grows by an eighth more than
         asked, so that a slowly densifying sample does not reallocate at every build."""
         if self._pool.shape[0] >= size:
             return
