@@ -197,8 +197,8 @@ def write(rows, out):
              "median share renewed | median rounds | work, builds / 100 | own builds, ns/ps | partial at best, ns/ps |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['N']} | {r['side']:g} | {r['own_per_100']:.0f} | {r['events_per_100']:.0f} | "
-                     f"{r['full_per_100']:.0f} | {r['median_share']:.2f} | {r['median_rounds']:.0f} | "
+        lines.append(f"| {r['scene']} | {r['N']} | {r['side']:g} | {r['own_per_100']:.0f} | "
+                     f"{r['events_per_100']:.0f} | {r['full_per_100']:.0f} | {r['median_share']:.2f} | {r['median_rounds']:.0f} | "
                      f"{r['work_per_100']:.1f} | {r['own_ns_ps']:.1f} | {r['partial_ns_ps']:.1f} |")
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     return lines

@@ -60,6 +60,28 @@ from numba import njit, prange
 
 #: rows per chunk: the unit of work of a thread and of the summation order
 CHUNK_ROWS = 16384
+#: a chunk spans at least this many layers of the list's cells where there are at least
+#: :data:`MIN_CHUNKS` such chunks (a chunk's partners reach about one layer past its end)
+CHUNK_LAYERS = 16
+#: the fewest chunks that thick layers may bring the count down to
+MIN_CHUNKS = 16
+
+
+def chunk_count(n, layer_rows):
+    """Chunks of a list of n rows whose cell layers hold up to ``layer_rows`` rows.
+
+    About n / :data:`CHUNK_ROWS`; but a chunk's partners reach about one layer of cells past
+    its last row, into rows that the next chunk owns (summed afterwards, :func:`reduce_shared`,
+    and held in the chunk's own buffer rows), so where layers are thick (a compact body of a
+    million clusters: about 9 000 rows a layer, half the rows shared at 16 384 rows a chunk)
+    chunks are made :data:`CHUNK_LAYERS` layers long, as long as there are at least
+    :data:`MIN_CHUNKS`.  A property of the list alone, never of the thread count: the sums'
+    order, and so the forces' bits, do not depend on it.
+    """
+    nk = max(1, n // CHUNK_ROWS)
+    if layer_rows > 0:
+        nk = min(nk, max(MIN_CHUNKS, n // (CHUNK_LAYERS * layer_rows)))
+    return max(1, nk)
 #: shared rows per block of :func:`reduce_shared`
 SHARED_BLOCK = 4096
 

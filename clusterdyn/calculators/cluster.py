@@ -251,7 +251,7 @@ class ClusterDynamics(Calculator):
                    "vs_store": old["vs_store"]}
             self._buffers = lay
         if lay["key"] != nl.nbuilds:
-            nk = max(1, n // K.CHUNK_ROWS)
+            nk = K.chunk_count(n, nl.layer_rows)
             lay["xs"] = nl.xs_nc          # the list's buffer of sorted positions (rewritten by each build)
             (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], lay["shared_n"],
              lay["shared_r"], lay["owner_r"]) = K.chunk_layout(nl.first_n, nl.jp_p, nl.j_mask, nk)

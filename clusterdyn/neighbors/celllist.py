@@ -584,6 +584,22 @@ def _cell_blocks(ustart, rows):
     return cblk, rows_b, maxrows
 
 
+@njit(cache=True)
+def _layer_rows(ukey, ustart, per):
+    """The most rows in one layer of the slowest slot (cells ``per`` keys apart share a layer)."""
+    best = 0
+    q = 0
+    nq = ukey.shape[0]
+    while q < nq:
+        g = ukey[q] // per
+        r = q
+        while r < nq and ukey[r] // per == g:
+            r += 1
+        best = max(best, ustart[r] - ustart[q])
+        q = r
+    return best
+
+
 @njit(cache=True, parallel=True)
 def _pack(j_p, img_p, shift, out_p):
     for p in prange(j_p.shape[0]):
@@ -1126,6 +1142,10 @@ class NeighborList:
         Cartesian lattice translations indexed by the image codes.
     nbuilds : int
         Number of builds so far.
+    layer_rows : int
+        With ``sort``: the most rows in one layer of cells across the slowest
+        cell axis at the last build (rows beyond it, a layer on, are the
+        farthest a row's partners sit in a half list); 0 otherwise.
     last_cells : str
         "dense", "sparse" or "coarse" (the unsorted or full-stencil search on a
         grid coarsened to at most :data:`MAX_CELLS_PER_PARTICLE` cells per particle).
@@ -1150,6 +1170,7 @@ class NeighborList:
         self._store = None
         self._key_store = None
         self.perm_n = None
+        self.layer_rows = 0
         self.jp_p = None
         self.img_shift = 0
         self.xs_nc = None
@@ -1371,6 +1392,7 @@ class NeighborList:
         self.first_n, self._j_p, self._img_p = first_n, j_p, img_p
         self.jp_p = None
         self.perm_n = None
+        self.layer_rows = 0
         self._offset_nc = wpos - pos
         self.last_cells = "coarse"
 
@@ -1416,6 +1438,7 @@ class NeighborList:
         if n >= 2 ** HALF_SHIFT:
             raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
         nslot = ncell[axes]
+        self.layer_rows = int(_layer_rows(ukey, ustart, nslot[1] * nslot[2]))
         periodic_s = periodic_c[axes].copy()
         slotbox = np.zeros((3, 3))
         for q, d in enumerate(axes):
@@ -1467,7 +1490,9 @@ class NeighborList:
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
         cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self._keys(n), False)
+        ukey, ustart, _ = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+                                     self._keys(n), False)
+        self.layer_rows = int(_layer_rows(ukey, ustart, ncell[axes[1]] * ncell[axes[2]]))
         first_n = self.first_n
         first_n[:] = 0
         # _search decodes cells with x slowest: re-bin the sorted rows that way

@@ -60,7 +60,7 @@ def test_centered_rebuild_ignores_a_moving_block():
 
 
 def test_forces_bit_identical_on_one_and_two_threads():
-    """Chunks depend on N only: the same sums in the same order on any thread count."""
+    """Chunks depend on the list only: the same sums in the same order on any thread count."""
     s = build_shock(size=(32, 16, 16), u=3 * units.km_s, J=50, seed=3)    # 32768: two chunks
     a, c = s.atoms, s.calc
     rng = np.random.default_rng(0)
@@ -154,3 +154,48 @@ def test_step_kernels_write_unshared_rows_as_the_full_sum_does(periodic_x):
     assert np.array_equal(p, p0 + h * f_all)
     f_fin2 = c.compute(a, virial=False, energy=False)["forces"]        # no kick: momenta untouched
     assert np.array_equal(f_fin2, f_all)
+
+
+def test_chunk_count_follows_the_layers_not_the_threads():
+    from clusterdyn.calculators import _cd_kernels as K
+    n = 40 * K.CHUNK_ROWS
+    assert K.chunk_count(n, 0) == 40                               # no layers known: rows alone
+    assert K.chunk_count(n, 1000) == 40                            # thin layers (a slab): rows alone
+    assert K.chunk_count(n, n // 8) == K.MIN_CHUNKS                # thick layers: never fewer than this
+    thick = n // (K.CHUNK_LAYERS * 20)
+    assert K.chunk_count(n, thick) == 20                           # CHUNK_LAYERS layers a chunk
+    assert K.chunk_count(100, 50) == 1
+
+
+def test_chunks_of_a_compact_body_span_layers(monkeypatch):
+    """In a compact body a cell layer holds more rows than a chunk: chunks of several layers share
+    far fewer rows (and buffer rows) with the next, and give the same forces, on any thread count."""
+    from clusterdyn.build.bodies import sphere
+    from clusterdyn.calculators import ClusterDynamics
+    from clusterdyn.calculators import _cd_kernels as K
+    monkeypatch.setattr(K, "CHUNK_ROWS", 128)
+    monkeypatch.setattr(K, "MIN_CHUNKS", 4)
+    monkeypatch.setattr(K, "CHUNK_LAYERS", 4)
+    r0 = 5 * units.um
+    a = sphere("Al", r0, 20 * r0)
+    rng = np.random.default_rng(1)
+    a.positions = a.positions + rng.normal(0, 0.03 * r0, a.positions.shape)
+    a.calc = c = ClusterDynamics()
+    n = len(a)
+    try:
+        set_max_threads(1)
+        f_new = c.compute(a)["forces"].copy()
+        lay = c._buffers
+        nk, shared, buf = len(lay["bounds"]) - 1, lay["shared_r"].shape[0], int(lay["boff"][-1])
+        assert c.nl.layer_rows > 4 * 128 and nk == max(4, n // (4 * c.nl.layer_rows))
+        set_max_threads(2 if __import__("numba").config.NUMBA_NUM_THREADS >= 2 else 1)
+        assert np.array_equal(c.compute(a)["forces"], f_new)
+        monkeypatch.setattr(K, "chunk_count", lambda n, layer_rows: max(1, n // K.CHUNK_ROWS))   # rows alone
+        c._buffers["key"] = None
+        f_old = c.compute(a)["forces"]
+    finally:
+        set_max_threads(None)
+    lay = c._buffers
+    assert len(lay["bounds"]) - 1 == n // 128
+    assert shared < 0.5 * lay["shared_r"].shape[0] and buf < 0.8 * lay["boff"][-1]
+    assert np.abs(f_new - f_old).max() <= 1e-12 * np.abs(f_old).max()
