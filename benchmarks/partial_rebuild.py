@@ -189,17 +189,26 @@ def run(scene, side, a):
             "own_ns_ps": own_cost, "partial_ns_ps": best}
 
 
+#: the table's columns: title, and the cell of a result row
+COLUMNS = [("scene", lambda r: r["scene"]), ("N", lambda r: r["N"]),
+           ("brick side (cut-offs)", lambda r: f"{r['side']:g}"),
+           ("own builds / 100 steps", lambda r: f"{r['own_per_100']:.0f}"),
+           ("renewals / 100", lambda r: f"{r['events_per_100']:.0f}"),
+           ("of them full", lambda r: f"{r['full_per_100']:.0f}"),
+           ("median share renewed", lambda r: f"{r['median_share']:.2f}"),
+           ("median rounds", lambda r: f"{r['median_rounds']:.0f}"),
+           ("work, builds / 100", lambda r: f"{r['work_per_100']:.1f}"),
+           ("own builds, ns/ps", lambda r: f"{r['own_ns_ps']:.1f}"),
+           ("partial at best, ns/ps", lambda r: f"{r['partial_ns_ps']:.1f}")]
+
+
 def write(rows, out):
+    """The table and the JSON of the cases done so far (written after each)."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
-    lines = ["| scene | N | brick side (cut-offs) | own builds / 100 steps | renewals / 100 | of them full | "
-             "median share renewed | median rounds | work, builds / 100 | own builds, ns/ps | partial at best, ns/ps |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in rows:
-        lines.append(f"| {r['scene']} | {r['N']} | {r['side']:g} | {r['own_per_100']:.0f} | "
-                     f"{r['events_per_100']:.0f} | {r['full_per_100']:.0f} | {r['median_share']:.2f} | {r['median_rounds']:.0f} | "
-                     f"{r['work_per_100']:.1f} | {r['own_ns_ps']:.1f} | {r['partial_ns_ps']:.1f} |")
+    lines = ["| " + " | ".join(t for t, _ in COLUMNS) + " |", "|---|" + "---:|" * (len(COLUMNS) - 1)]
+    lines += ["| " + " | ".join(str(cell(r)) for _, cell in COLUMNS) + " |" for r in rows]
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     return lines
 
