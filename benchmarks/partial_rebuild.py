@@ -33,7 +33,6 @@ Results: ``benchmarks/results/partial_rebuild.md``, ``.json`` (written after eac
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -45,23 +44,19 @@ RESULTS = HERE / "results"
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
+from clusterdyn.neighbors.celllist import _brick_pair_safe  # noqa: E402
+
 
 @njit(cache=True)
-def failing_bricks(mid_b3, rad_b2, blo_b3, bhi_b3, skin, rc, out_b):
-    """Every pair of bricks (open box) through the list's test; out_b[a] True when brick a fails
-    with itself or another brick."""
+def failing_bricks(mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc, out_b):
+    """Every pair of bricks through the list's own pair test (:func:`_brick_pair_safe`); out_b[a]
+    True when brick a fails with itself or another brick."""
     nb = mid_b3.shape[0]
     for a in range(nb):
         out_b[a] = not rad_b2[a, 0] + rad_b2[a, 1] <= skin
     for a in range(nb):
         for b in range(a + 1, nb):
-            s2 = 0.0
-            c2 = 0.0
-            for d in range(3):
-                g = max(0.0, blo_b3[b, d] - bhi_b3[a, d], blo_b3[a, d] - bhi_b3[b, d])
-                s2 += g * g
-                c2 += (mid_b3[a, d] - mid_b3[b, d]) ** 2
-            if not math.sqrt(c2) + rad_b2[a, 0] + rad_b2[b, 0] <= max(skin, math.sqrt(s2) - rc):
+            if not _brick_pair_safe(a, b, mid_b3, rad_b2, blo_b3, bhi_b3, box_c, periodic_c, skin, rc):
                 out_b[a] = True
                 out_b[b] = True
 
@@ -111,7 +106,8 @@ class Emulated:
         CL = self.CL
         CL._brick_centres(x, self.X, self.brick_n, self.acc, self.hi, self.mid)
         CL._brick_radii(x, self.X, self.brick_n, self.mid, self.acc2, self.rad)
-        failing_bricks(self.mid, self.rad, self.blo, self.bhi, self.nl.skin, self.nl.cutoff, self.bad)
+        failing_bricks(self.mid, self.rad, self.blo, self.bhi, self.box, self.periodic, self.nl.skin,
+                       self.nl.cutoff, self.bad)
         return self.bad
 
     def step(self, x):
@@ -131,7 +127,7 @@ class Emulated:
             sel = bad[self.brick_n]
             self.X[sel] = x[sel]
             self._boxes()
-            bad = self._fails(x).copy()
+            bad = self._fails(x)
         return float(self.count[renewed].sum() / n), rounds, False
 
 

@@ -65,6 +65,8 @@ CHUNK_ROWS = 16384
 CHUNK_LAYERS = 16
 #: the fewest chunks that thick layers may bring the count down to
 MIN_CHUNKS = 16
+#: shared rows per block of :func:`reduce_shared`
+SHARED_BLOCK = 4096
 
 
 def chunk_count(n, layer_rows):
@@ -73,7 +75,7 @@ def chunk_count(n, layer_rows):
     About n / :data:`CHUNK_ROWS`; but a chunk's partners reach about one layer of cells past
     its last row, into rows that the next chunk owns (summed afterwards, :func:`reduce_shared`,
     and held in the chunk's own buffer rows), so where layers are thick (a compact body of a
-    million clusters: about 9 000 rows a layer, half the rows shared at 16 384 rows a chunk)
+    million clusters: up to 22 000 rows a layer, half the rows shared at 16 384 rows a chunk)
     chunks are made :data:`CHUNK_LAYERS` layers long, as long as there are at least
     :data:`MIN_CHUNKS`.  A property of the list alone, never of the thread count: the sums'
     order, and so the forces' bits, do not depend on it.
@@ -81,9 +83,7 @@ def chunk_count(n, layer_rows):
     nk = max(1, n // CHUNK_ROWS)
     if layer_rows > 0:
         nk = min(nk, max(MIN_CHUNKS, n // (CHUNK_LAYERS * layer_rows)))
-    return max(1, nk)
-#: shared rows per block of :func:`reduce_shared`
-SHARED_BLOCK = 4096
+    return nk
 
 
 def kernel_tables(coef, meta):
