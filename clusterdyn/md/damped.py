@@ -277,6 +277,32 @@ class DampedVerlet(MolecularDynamics):
         self._ledger0 = None
         self._drives()
 
+    def _adopt_calc(self, calc):
+        """Take up a calculator put on the Atoms after the dynamics was made (as ASE's
+        dynamics use whatever ``atoms.calc`` is), checked as at construction: damping
+        and sorts need ClusterDynamics, and the time step must stay under the new
+        calculator's stability limit.  The forces are recomputed with it."""
+        if not isinstance(calc, ClusterDynamics):
+            if self.J is not None:
+                raise InputError("atoms.calc", type(calc).__name__,
+                                 "a ClusterDynamics calculator when damping is on (J given)")
+            if self.sort_interval is not None or self.region is not None:
+                raise InputError("atoms.calc", type(calc).__name__,
+                                 "a ClusterDynamics calculator with sort_interval or region")
+            limit = None
+        else:
+            calc.setup(self.atoms)
+            limit = stability_limit(calc)
+            if self.dt > limit:
+                raise InputError("atoms.calc", repr(calc), f"a calculator whose stability limit ({limit:.6g}) is "
+                                 f"at least the dynamics' time step {self.dt:.6g}")
+        self.calc = calc
+        self.stability_limit = limit
+        self._eta = calc.damping_matrix(self.J) if self.J is not None else None
+        self._safe = {}
+        self.forces = None
+        self._epot = None
+
     @classmethod
     def _sort_interval(cls, atoms, interval):
         """``interval`` checked (a positive whole number of steps, or None) and the Atoms readied
@@ -476,6 +502,8 @@ class DampedVerlet(MolecularDynamics):
         ``adjust_positions`` applies.
         """
         atoms = self.atoms
+        if atoms.calc is not self.calc:
+            self._adopt_calc(atoms.calc)
         if self.forces is None or forces is not None:
             self._invm_n = self._invm()
             self.forces = self._compute_forces() if forces is None else forces

@@ -175,3 +175,27 @@ def test_fused_passes_give_the_separate_passes_trajectory(J):
     (x1, p1, f1, e1, c1), (x2, p2, f2, e2, c2) = runs
     assert np.array_equal(x1, x2) and np.array_equal(p1, p2) and np.array_equal(f1, f2)
     assert e1 == e2 == c1 == c2
+
+
+def test_a_calculator_put_on_the_atoms_later_is_used():
+    """As ASE's dynamics do, the step uses whatever atoms.calc is now (checked as at construction)."""
+    from ase.calculators.lj import LennardJones
+    a = fcc_packing("Al", R0, size=(3, 3, 3), pbc=True)
+    thermal(a, 0.02, seed=5)
+    b = a.copy()
+    d1 = DampedVerlet(a, J=50)
+    d1.run(5)
+    b.positions[:] = a.positions
+    b.set_momenta(a.get_momenta())
+    new = ClusterDynamics(skin=0.1, n_table=4000)
+    a.calc = new
+    b.calc = ClusterDynamics(skin=0.1, n_table=4000)
+    d2 = DampedVerlet(b, timestep=d1.dt, J=50)
+    d1.run(20)
+    d2.run(20)
+    assert d1.calc is new and new.nl is not None
+    np.testing.assert_array_equal(a.positions, b.positions)
+    # damping needs ClusterDynamics: refused at the next step, naming the argument
+    a.calc = LennardJones()
+    with pytest.raises(InputError, match="atoms.calc=.*ClusterDynamics"):
+        d1.run(1)
