@@ -38,6 +38,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
+from clusterdyn.calculators._cd_kernels import _put3
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 RESULTS = HERE / "results"
@@ -106,14 +108,7 @@ def _two_pass_chunk(k, xs_nc, first_n, pi_p, jp_p, shift, image_sc, gtab, meta, 
     for i in range(i0, i1):
         if shared_n[i] == 0:
             r = off + i
-            o = np.uint64(i)
-            out_nc[o, 0] = f_mc[r, 0]
-            out_nc[o, 1] = f_mc[r, 1]
-            out_nc[o, 2] = f_mc[r, 2]
-            if kick:
-                p_nc[o, 0] += h * f_mc[r, 0]
-                p_nc[o, 1] += h * f_mc[r, 1]
-                p_nc[o, 2] += h * f_mc[r, 2]
+            _put3(out_nc, p_nc, np.uint64(i), f_mc[r, 0], f_mc[r, 1], f_mc[r, 2], kick, h)
     stat_k[k, 1] = kbmin
 
 
