@@ -211,11 +211,7 @@ class DampedVerlet(MolecularDynamics):
                 raise InputError("J", J, "a positive number (Gamma = c0/(J r0)) or None for no damping") from None
             if not (J > 0 and math.isfinite(J)):
                 raise InputError("J", J, "a positive number (Gamma = c0/(J r0)) or None for no damping")
-        if isinstance(calc, ClusterDynamics):
-            calc.setup(atoms)
-        elif J is not None:
-            raise InputError("atoms.calc", type(calc).__name__,
-                             "a ClusterDynamics calculator when damping is on (J given)")
+        limit = self._calc_limit(atoms, calc, J)
         if region is not None and not isinstance(region, RegionOfInterest):
             raise InputError("region", region, "a RegionOfInterest (or None)")
         if region is not None:
@@ -242,7 +238,7 @@ class DampedVerlet(MolecularDynamics):
         self.calc = calc
         speeds = [c.max_speed() for c in atoms.constraints if isinstance(c, Drive)]
         u_max = max([s for s in speeds if s is not None] + [0.0])
-        self.stability_limit = stability_limit(calc) if isinstance(calc, ClusterDynamics) else None
+        self.stability_limit = limit
         if timestep is None:
             if not isinstance(calc, ClusterDynamics):
                 raise InputError("timestep", None, "a time step (no default without ClusterDynamics)")
@@ -277,25 +273,28 @@ class DampedVerlet(MolecularDynamics):
         self._ledger0 = None
         self._drives()
 
+    @staticmethod
+    def _calc_limit(atoms, calc, J):
+        """The calculator checked for these Atoms and damping ``J`` (ClusterDynamics, set up,
+        when J is given); returns its stability limit (None for another calculator)."""
+        if isinstance(calc, ClusterDynamics):
+            calc.setup(atoms)
+            return stability_limit(calc)
+        if J is not None:
+            raise InputError("atoms.calc", type(calc).__name__,
+                             "a ClusterDynamics calculator when damping is on (J given)")
+        return None
+
     def _adopt_calc(self, calc):
         """Take up a calculator put on the Atoms after the dynamics was made (as ASE's
-        dynamics use whatever ``atoms.calc`` is), checked as at construction: damping
-        and sorts need ClusterDynamics, and the time step must stay under the new
-        calculator's stability limit.  The forces are recomputed with it."""
-        if not isinstance(calc, ClusterDynamics):
-            if self.J is not None:
-                raise InputError("atoms.calc", type(calc).__name__,
-                                 "a ClusterDynamics calculator when damping is on (J given)")
-            if self.sort_interval is not None or self.region is not None:
-                raise InputError("atoms.calc", type(calc).__name__,
-                                 "a ClusterDynamics calculator with sort_interval or region")
-            limit = None
-        else:
-            calc.setup(self.atoms)
-            limit = stability_limit(calc)
-            if self.dt > limit:
-                raise InputError("atoms.calc", repr(calc), f"a calculator whose stability limit ({limit:.6g}) is "
-                                 f"at least the dynamics' time step {self.dt:.6g}")
+        dynamics use whatever ``atoms.calc`` is), checked as at construction (damping and
+        sorts need ClusterDynamics), and the time step against the new calculator's
+        stability limit.  The forces are recomputed with it."""
+        limit = self._calc_limit(self.atoms, calc, self.J)
+        self._sort_interval(self.atoms, self.sort_interval)
+        if limit is not None and self.dt > limit:
+            raise InputError("atoms.calc", type(calc).__name__, f"a calculator whose stability limit "
+                             f"({limit:.6g}) is at least the dynamics' time step {self.dt:.6g}")
         self.calc = calc
         self.stability_limit = limit
         self._eta = calc.damping_matrix(self.J) if self.J is not None else None

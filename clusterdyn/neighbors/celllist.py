@@ -318,19 +318,18 @@ def _radix_sort(key, perm, scr):
         if k == 0 or key[k] != key[k - 1]:
             m += 1
     ustart = np.empty(m + 1, np.int64)
-    out = key0
     q = 0
     last = -1
     for k in range(n):
         c = key[k]
         if k == 0 or c != last:
-            out[q] = c                      # q <= k: in place when the sorted keys are key0
+            key0[q] = c                     # q <= k: in place when the sorted keys are key0
             ustart[q] = k
             q += 1
         last = c
         perm[k] = idx[k]
     ustart[m] = n
-    return out[:m], ustart
+    return key0[:m], ustart
 
 
 def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n, sparse):
