@@ -2,6 +2,7 @@
 
     python benchmarks/partial_rebuild.py                          # debris contact and cloud (123k), bricks 8, 4, 2
     python benchmarks/partial_rebuild.py --scenes contact --sides 4 --steps 60
+    python benchmarks/partial_rebuild.py --scenes slab --sides 8,4,2,1 --out benchmarks/results/partial_rebuild_slab
 
 The list's rebuild test (:meth:`clusterdyn.neighbors.NeighborList.update`) bounds the
 change of every unlisted pair by bricks: two bricks a, b pass when |centre_a - centre_b| +
@@ -14,7 +15,8 @@ pair was at least cutoff + skin apart in X" kept), the others keep theirs.
 
 This script asks what that would save before building it.  From the saved debris states
 (``benchmarks/debris_cloud.py``'s 123k cloud at step 400, the contact, and 1 200, the
-cloud; saved by ``benchmarks/debris_lammps.py``'s ``debris_state``) the run goes on for
+cloud; saved by ``benchmarks/debris_lammps.py``'s ``debris_state``), or from the race's
+piston-shock state (``slab``: 31% shocked, undamped, ``benchmarks/_states.py``) the run goes on for
 ``--steps`` steps, one thread, with the list's own test and builds (its bricks of 8
 cut-offs; the physics is not touched).  Beside it, emulated references X are kept: after each step the bricks' test is
 evaluated on X with the list's own kernels (every pair of bricks compared); the failing bricks
@@ -87,8 +89,6 @@ class Emulated:
         self.X = x.copy()
         self.count = np.bincount(self.brick_n, minlength=self.m)
         self.box, self.periodic = b[3], b[4]
-        if self.periodic.any():
-            raise SystemExit("the emulation's brick test is for open boxes")
         self.acc = np.empty((b[5].shape[0], self.m, 6))
         self.acc2 = np.empty((b[5].shape[0], self.m, 2))
         self.blo = np.empty((self.m, 3))
@@ -135,9 +135,13 @@ def run(scene, side, a):
     import clusterdyn.calculators._cd_kernels as K
     import clusterdyn.neighbors.celllist as CL
     from clusterdyn.io.checkpoint import load_run
-    from debris_lammps import debris_state
-    path, _ = debris_state(a, {"contact": 400, "cloud": 1200}[scene])
-    atoms, dyn, _ = load_run(path)
+    if scene == "slab":
+        from _states import load_state, shock_state
+        atoms, dyn, _ = load_state(shock_state(a.nx, 0.3))
+    else:
+        from debris_lammps import debris_state
+        path, _ = debris_state(a, {"contact": 400, "cloud": 1200}[scene])
+        atoms, dyn, _ = load_run(path)
     dyn.run(2)
     nl = atoms.calc.nl
     spent = {"build": 0.0, "layout": 0.0}
@@ -212,7 +216,8 @@ def write(rows, out):
 def main(argv=None):
     from debris_cloud import add_scene_args
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", default="contact,cloud")
+    ap.add_argument("--scenes", default="contact,cloud", help="contact, cloud (the 123k debris), slab (the race's state)")
+    ap.add_argument("--nx", type=int, default=128, help="the slab's length in cells (N = 1024 nx)")
     ap.add_argument("--sides", default="8,4,2", help="brick sides in cut-offs (cutoff + skin)")
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--full-at", type=float, default=0.5,
@@ -221,9 +226,9 @@ def main(argv=None):
     add_scene_args(ap, 50.0, 6.0, 35.0)
     a = ap.parse_args(argv)
     scenes = a.scenes.split(",")
-    bad = [s for s in scenes if s not in ("contact", "cloud")]
+    bad = [s for s in scenes if s not in ("contact", "cloud", "slab")]
     if bad:
-        ap.error(f"--scenes: {bad[0]!r} is not one of contact, cloud")
+        ap.error(f"--scenes: {bad[0]!r} is not one of contact, cloud, slab")
     try:
         sides = [float(s) for s in a.sides.split(",")]
     except ValueError:
