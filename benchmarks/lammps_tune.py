@@ -13,14 +13,18 @@ same positions and velocities.
    (:func:`clusterdyn.io.lammps.export_lammps`) and the deck is varied as a
    LAMMPS user would: ``pair_style table linear|spline N`` (1000 to 100000
    points; the table file has the same N), the neighbour skin and
-   ``neigh_modify every/delay/check``.  For each configuration: the force
+   ``neigh_modify every/delay/check``, and LAMMPS' own CPU accelerator: the
+   OPENMP package's styles on one thread per rank (``package omp 1``,
+   ``suffix omp``: ``pair table/omp``, ``fix nve/omp``, as ``-sf omp -pk omp 1``
+   on the command line; the OPT and INTEL packages have no table style).  For each configuration: the force
    error on the state, ``max |F_LAMMPS - F_clusterdyn| / max |F_clusterdyn|``
    (``run 0`` with the forces dumped), the rate over ``--steps`` steps
    (particle-steps per second of LAMMPS' loop time), its neighbour builds and
    LAMMPS' "dangerous builds" (a rebuild check that came too late: such a
    configuration can miss pairs and is not eligible).  Tables are tried at
    the clusterdyn skin with LAMMPS' default rebuild check; skins and
-   ``neigh_modify`` settings with the fastest table that meets the accuracy.
+   ``neigh_modify`` settings with the fastest table that meets the accuracy;
+   then the three fastest eligible configurations with the OPENMP styles.
    The winner: the fastest eligible configuration whose force error is at
    most ``--tol`` (1e-4).
 2. **Race**: clusterdyn (1 and 2 threads) against the winner (1 and 2 MPI
@@ -58,6 +62,10 @@ TABLES = [("linear", 1000), ("linear", 2000), ("linear", 5000), ("linear", 10000
           ("linear", 100000), ("spline", 1000), ("spline", 2000), ("spline", 5000), ("spline", 10000)]
 #: neighbour skins tried, multiples of r0
 SKINS = [0.1, 0.15, 0.2, 0.25, 0.3, 0.4]
+#: LAMMPS accelerator suffixes tried on the fastest configurations ("" = the plain styles)
+SUFFIXES = ["omp"]
+#: the deck's first lines for a suffix: one OpenMP thread per MPI rank (OMP_NUM_THREADS=1 too)
+SUFFIX_LINES = {"": "", "omp": "package         omp 1\nsuffix          omp\n"}
 #: neigh_modify settings tried
 NEIGH = ["every 1 delay 0 check yes", "every 2 delay 0 check yes", "every 5 delay 0 check yes",
          "every 10 delay 0 check yes", "every 1 delay 5 check yes"]
@@ -116,9 +124,9 @@ def export_base(state, J, folder, steps):
     return Path(folder), f, c.potentials[0].r0, c
 
 
-def variant(base, folder, calc, style, npts, skin, neigh, force_run=False, tables=None):
-    """A copy of the deck in ``base`` with another table, skin and neigh_modify; ``force_run``:
-    ``run 0`` with the forces dumped."""
+def variant(base, folder, calc, style, npts, skin, neigh, force_run=False, tables=None, suffix=""):
+    """A copy of the deck in ``base`` with another table, skin, neigh_modify and accelerator suffix
+    (:data:`SUFFIX_LINES`); ``force_run``: ``run 0`` with the forces dumped."""
     from clusterdyn.io.lammps import DATA_FILE, INPUT_FILE, TABLE_FILE, write_tables
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -141,7 +149,7 @@ def variant(base, folder, calc, style, npts, skin, neigh, force_run=False, table
     if force_run:
         text = re.sub(r"^run .*$", "dump            forces all custom 1 forces.dump id fx fy fz\n"
                       "dump_modify     forces sort id format float %.17g\nrun             0", text, flags=re.M)
-    (folder / INPUT_FILE).write_text(text)
+    (folder / INPUT_FILE).write_text(SUFFIX_LINES[suffix] + text)
     return folder
 
 
@@ -184,25 +192,26 @@ def tune(nx, state, steps, tol, tmp, quick=False, log=print):
     tables = {}
     rows = []
 
-    def try_config(style, npts, skin, neigh):
-        tag = f"{style}_{npts}_{skin:g}_{neigh.replace(' ', '')}"
+    def try_config(style, npts, skin, neigh, suffix=""):
+        tag = f"{style}_{npts}_{skin:g}_{neigh.replace(' ', '')}_{suffix}"
         err = None
-        key = (style, npts)
+        key = (style, npts, suffix)
         if key in errs:
             err = errs[key]
         else:
-            ff = variant(base, tmp / f"f_{nx}_{style}_{npts}", calc, style, npts, cd_skin * r0, DEFAULT_NEIGH,
-                         force_run=True, tables=tables)
+            ff = variant(base, tmp / f"f_{nx}_{style}_{npts}_{suffix}", calc, style, npts, cd_skin * r0,
+                         DEFAULT_NEIGH, force_run=True, tables=tables, suffix=suffix)
             err = errs[key] = force_error(ff, f_cd)
-        d = variant(base, tmp / f"t_{nx}_{tag}", calc, style, npts, skin * r0, neigh, tables=tables)
+        d = variant(base, tmp / f"t_{nx}_{tag}", calc, style, npts, skin * r0, neigh, tables=tables, suffix=suffix)
         r = lammps_rate(d, 1)
         row = {"N": r["N"], "style": style, "points": npts, "skin_r0": skin, "neigh_modify": neigh,
-               "force_error": err, "rate": r["rate"], "builds": r["builds"], "dangerous": r["dangerous"],
-               "steps": r["steps"], "load": r["load"], "timing": r["timing"]}
+               "suffix": suffix, "force_error": err, "rate": r["rate"], "builds": r["builds"],
+               "dangerous": r["dangerous"], "steps": r["steps"], "load": r["load"], "timing": r["timing"]}
         row["eligible"] = err <= tol and r["dangerous"] == 0
         rows.append(row)
-        log(f"  N={r['N']} table {style} {npts}, skin {skin:g} r0, {neigh}: {r['rate']:.3g} particle-steps/s, "
-            f"force error {err:.1e}, builds {r['builds']}, dangerous {r['dangerous']}, load {r['load']:.1f}")
+        log(f"  N={r['N']} table {style} {npts}{'/' + suffix if suffix else ''}, skin {skin:g} r0, {neigh}: "
+            f"{r['rate']:.3g} particle-steps/s, force error {err:.1e}, builds {r['builds']}, "
+            f"dangerous {r['dangerous']}, load {r['load']:.1f}")
         return row
 
     errs = {}
@@ -220,15 +229,20 @@ def tune(nx, state, steps, tol, tmp, quick=False, log=print):
     best_skin = max(ok, key=lambda r: r["rate"])["skin_r0"]
     for neigh in (NEIGH[1:] if not quick else NEIGH[1:3]):
         try_config(best_tab["style"], best_tab["points"], best_skin, neigh)
-    # the two fastest eligible configurations, timed again (one run each is noisy)
+    # the three fastest eligible configurations with each accelerator suffix
+    ok = sorted([r for r in rows if r["eligible"]], key=lambda r: -r["rate"])[:3]
+    for suffix in SUFFIXES:
+        for r in ok:
+            try_config(r["style"], r["points"], r["skin_r0"], r["neigh_modify"], suffix)
+    # the three fastest eligible configurations, timed again (one run each is noisy)
     ok = sorted([r for r in rows if r["eligible"]], key=lambda r: -r["rate"])[:3]
     for r in ok:
-        again = try_config(r["style"], r["points"], r["skin_r0"], r["neigh_modify"])
+        again = try_config(r["style"], r["points"], r["skin_r0"], r["neigh_modify"], r["suffix"])
         again["repeat_of"] = rows.index(r)
     # best of the repeats per configuration
     conf = {}
     for r in rows:
-        k = (r["style"], r["points"], r["skin_r0"], r["neigh_modify"])
+        k = (r["style"], r["points"], r["skin_r0"], r["neigh_modify"], r["suffix"])
         if r["eligible"] and (k not in conf or r["rate"] > conf[k]["rate"]):
             conf[k] = r
     win = max(conf.values(), key=lambda r: r["rate"])
@@ -242,10 +256,10 @@ def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print):
     decks = {}
     base_off = Path(tun["base"])
     decks["none"] = variant(base_off, tmp / f"race_{nx}_off", calc, win["style"], win["points"],
-                            win["skin_r0"] * r0, win["neigh_modify"], tables=tun["tables"])
+                            win["skin_r0"] * r0, win["neigh_modify"], tables=tun["tables"], suffix=win["suffix"])
     base_j, _, _, calc_j = export_base(state, 50.0, tmp / f"base_{nx}_j50", steps)
     decks["50"] = variant(base_j, tmp / f"race_{nx}_j50", calc_j, win["style"], win["points"],
-                          win["skin_r0"] * r0, win["neigh_modify"], tables=tun["tables"])
+                          win["skin_r0"] * r0, win["neigh_modify"], tables=tun["tables"], suffix=win["suffix"])
     runs = []
     for rep in range(repeat):
         for J in ("none", "50"):
@@ -298,12 +312,14 @@ def markdown(rep):
         w = t["winner"]
         L += [f"## N = {w['N']}: tuning (damping off, 1 rank)", "",
               f"clusterdyn's own skin: {t['cd_skin_r0']:g} r0. Winner: **table {w['style']} {w['points']}, "
-              f"skin {w['skin_r0']:g} r0, neigh_modify {w['neigh_modify']}** ({w['rate']:.3g} particle-steps/s, "
-              f"force error {w['force_error']:.1e}).", "",
-              "| table | points | skin / r0 | neigh_modify | force error | particle-steps/s | builds | dangerous "
-              "| eligible | load |", "|---|---|---|---|---|---|---|---|---|---|"]
+              f"skin {w['skin_r0']:g} r0, neigh_modify {w['neigh_modify']}, "
+              f"{'suffix ' + w['suffix'] if w.get('suffix') else 'plain styles'}** ({w['rate']:.3g} "
+              f"particle-steps/s, force error {w['force_error']:.1e}).", "",
+              "| table | points | skin / r0 | neigh_modify | suffix | force error | particle-steps/s | builds | dangerous "
+              "| eligible | load |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in t["rows"]:
             L.append(f"| {r['style']} | {r['points']} | {r['skin_r0']:g} | {r['neigh_modify']} | "
+                     f"{r.get('suffix') or '-'} | "
                      f"{r['force_error']:.1e} | {r['rate']:.3g} | {r['builds']} / {r['steps']} | {r['dangerous']} | "
                      f"{'yes' if r['eligible'] else 'no'} | {r['load']:.1f} |")
         s = size["summary"]
@@ -378,7 +394,8 @@ def main(argv=None):
         print("tuning LAMMPS", flush=True)
         tun = tune(nx, state, a.steps, a.tol, tmp, quick=a.quick, log=lambda s: print(s, flush=True))
         w = tun["winner"]
-        print(f"winner: table {w['style']} {w['points']}, skin {w['skin_r0']:g} r0, {w['neigh_modify']}", flush=True)
+        print(f"winner: table {w['style']} {w['points']}, skin {w['skin_r0']:g} r0, {w['neigh_modify']}, "
+              f"suffix {w['suffix'] or 'none'}", flush=True)
         runs = race(nx, state, a.steps, w, tun, tmp, a.repeat, threads, log=lambda s: print(s, flush=True))
         summ = summarise(runs, threads)
         sizes.append({"tuning": {k_: v for k_, v in tun.items() if k_ not in ("calc", "tables")},
