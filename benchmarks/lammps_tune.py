@@ -1,6 +1,6 @@
 """A fair race: LAMMPS tuned for speed at a stated force accuracy, then raced by clusterdyn.
 
-    python benchmarks/lammps_tune.py                          # 128k and 512k clusters, about 1.5 h
+    python benchmarks/lammps_tune.py                          # 128k and 512k clusters, about 30-90 min
     python benchmarks/lammps_tune.py --sizes 32 --steps 60 --repeat 1 --quick
 
 The scene is the aluminium piston shock (``build_shock``, [100], u = 3 km/s, 10
