@@ -68,3 +68,41 @@ def load_state(path, J=None):
         dyn.set_state(dict(st, J=float(J)))
         dyn.forces = None              # forces of the undamped state: recomputed with damping
     return atoms, dyn, extra
+
+
+#: the states the rebuild studies start from (``rebuild_oracle.py``, ``partial_rebuild.py``): the
+#: race's slab (:func:`shock_state`, 30% shocked, undamped) and the 123k debris cloud at its contact
+#: and cloud steps (``debris_lammps.py``'s ``debris_state``, scene options from ``debris_cloud.py``)
+SCENES = {"slab": None, "contact": 400, "cloud": 1200}
+
+
+def scene_list(ap, text):
+    """The comma-separated ``--scenes`` value, each checked against :data:`SCENES` (``ap.error`` else)."""
+    scenes = text.split(",")
+    bad = [s for s in scenes if s not in SCENES]
+    if bad:
+        ap.error(f"--scenes: {bad[0]!r} is not one of {', '.join(SCENES)}")
+    return scenes
+
+
+def load_scene(scene, a):
+    """(atoms, dyn) of a scene of :data:`SCENES`; ``a``: the parsed options (``nx`` for the slab,
+    the debris scene's for the others)."""
+    if scene == "slab":
+        atoms, dyn, _ = load_state(shock_state(a.nx, 0.3))
+        return atoms, dyn
+    from clusterdyn.io.checkpoint import load_run
+    from debris_lammps import debris_state
+    path, _ = debris_state(a, SCENES[scene])
+    atoms, dyn, _ = load_run(path)
+    return atoms, dyn
+
+
+def write_report(out, data, lines):
+    """``out``.json (``data``) and ``out``.md (``lines``), the folder made; returns the .md path."""
+    import json
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(data, indent=1, default=str))
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    return out.with_suffix(".md")

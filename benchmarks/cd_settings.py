@@ -13,7 +13,6 @@ default table (10407 bins) on the state, relative to the largest force.
 """
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -23,6 +22,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+
+from _states import write_report  # noqa: E402
 RESULTS = HERE / "results"
 
 
@@ -79,11 +80,8 @@ def main(argv=None):
     rows = [{"skin_r0": s, "n_table": nt, "rate": max(rates[s, nt]), "rates": rates[s, nt],
              "relative": max(rates[s, nt]) / best0, "builds": builds[s, nt], "force_error": err[s, nt],
              "default": (s, nt) == (skin0, N_BINS)} for s, nt in configs]
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     meta = {"N": len(atoms), "steps": a.steps, "repeat": a.repeat, "load": os.getloadavg()[0],
             "date": time.strftime("%Y-%m-%d %H:%M")}
-    out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     L = ["# clusterdyn's skin and table size on the race's scene", "",
          f"{meta['date']}: `python benchmarks/cd_settings.py --steps {a.steps} --repeat {a.repeat}`; 128k piston "
          f"shock from the 30%-shocked state, N = {meta['N']}, one thread, process clock, best of {a.repeat} "
@@ -94,8 +92,7 @@ def main(argv=None):
         L.append(f"| {r['skin_r0']:g}{' (default)' if r['default'] else ''} | {r['n_table']} | {r['rate']:.3g} | "
                  f"{r['relative']:.2f} | {max(r['builds'])} / {a.steps} | {r['force_error']:.1e} | "
                  + ", ".join(f"{x:.3g}" for x in r["rates"]) + " |")
-    out.with_suffix(".md").write_text("\n".join(L) + "\n")
-    print(f"wrote {out.with_suffix('.md')}")
+    print(f"wrote {write_report(a.out, {'meta': meta, 'rows': rows}, L)}")
 
 
 if __name__ == "__main__":

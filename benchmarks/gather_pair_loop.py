@@ -28,9 +28,7 @@ costs by itself).
 """
 
 import argparse
-import json
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -42,6 +40,8 @@ from clusterdyn.calculators._cd_kernels import _put3
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+
+from _states import write_report  # noqa: E402
 RESULTS = HERE / "results"
 
 
@@ -237,12 +237,9 @@ def main(argv=None):
                      "gathers_in_ir": gat.get(name, 0)})
         print(f"{name:28s} {1e9 * t / n:6.1f} ns/particle  x{t / base:4.2f}  force error {err:.1e}"
               f"  gathers in IR {gat.get(name, 0)}", flush=True)
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     meta_ = {"N": n, "pairs_per_particle": jp_p.shape[0] / n, "block": a.block, "repeat": a.repeat,
              "date": time.strftime("%Y-%m-%d %H:%M"),
              "load": os.getloadavg()[0]}
-    out.with_suffix(".json").write_text(json.dumps({"meta": meta_, "rows": rows}, indent=1))
     L = ["# A vectorised pair loop against the scalar kernel", "",
          f"{meta_['date']}: `python benchmarks/gather_pair_loop.py --block {a.block} --repeat {a.repeat}`; "
          f"128k piston shock, 30% shocked, N = {n}, {meta_['pairs_per_particle']:.2f} listed pairs a particle, "
@@ -252,8 +249,7 @@ def main(argv=None):
     for r in rows:
         L.append(f"| {r['variant']} | {r['ns_per_particle']:.1f} | {r['ns_per_pair']:.2f} | {r['relative']:.2f} | "
                  f"{'n/a' if r['identical'] is None else format(r['force_error'], '.1e')} | {'n/a' if r['identical'] is None else ('yes' if r['identical'] else 'no')} | {r['gathers_in_ir']} |")
-    out.with_suffix(".md").write_text("\n".join(L) + "\n")
-    print(f"wrote {out.with_suffix('.md')}")
+    print(f"wrote {write_report(a.out, {'meta': meta_, 'rows': rows}, L)}")
 
 
 if __name__ == "__main__":

@@ -34,7 +34,6 @@ Results: ``benchmarks/results/partial_rebuild.md``, ``.json`` (written after eac
 """
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -47,6 +46,7 @@ import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
 from clusterdyn.neighbors.celllist import _brick_pair_safe  # noqa: E402
+from _states import load_scene, scene_list, write_report  # noqa: E402
 
 
 @njit(cache=True)
@@ -134,14 +134,7 @@ class Emulated:
 def run(scene, side, a):
     import clusterdyn.calculators._cd_kernels as K
     import clusterdyn.neighbors.celllist as CL
-    from clusterdyn.io.checkpoint import load_run
-    if scene == "slab":
-        from _states import load_state, shock_state
-        atoms, dyn, _ = load_state(shock_state(a.nx, 0.3))
-    else:
-        from debris_lammps import debris_state
-        path, _ = debris_state(a, {"contact": 400, "cloud": 1200}[scene])
-        atoms, dyn, _ = load_run(path)
+    atoms, dyn = load_scene(scene, a)
     dyn.run(2)
     nl = atoms.calc.nl
     spent = {"build": 0.0, "layout": 0.0}
@@ -204,12 +197,9 @@ COLUMNS = [("scene", lambda r: r["scene"]), ("N", lambda r: r["N"]),
 
 def write(rows, out):
     """The table and the JSON of the cases done so far (written after each)."""
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
     lines = ["| " + " | ".join(t for t, _ in COLUMNS) + " |", "|---|" + "---:|" * (len(COLUMNS) - 1)]
     lines += ["| " + " | ".join(str(cell(r)) for _, cell in COLUMNS) + " |" for r in rows]
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    write_report(out, rows, lines)
     return lines
 
 
@@ -225,10 +215,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(RESULTS / "partial_rebuild"))
     add_scene_args(ap, 50.0, 6.0, 35.0)
     a = ap.parse_args(argv)
-    scenes = a.scenes.split(",")
-    bad = [s for s in scenes if s not in ("contact", "cloud", "slab")]
-    if bad:
-        ap.error(f"--scenes: {bad[0]!r} is not one of contact, cloud, slab")
+    scenes = scene_list(ap, a.scenes)
     try:
         sides = [float(s) for s in a.sides.split(",")]
     except ValueError:

@@ -25,26 +25,15 @@ keeps it short.
 """
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+
+from _states import load_scene, scene_list, write_report  # noqa: E402
 RESULTS = HERE / "results"
-
-
-def load(scene, a):
-    from _states import load_state, shock_state
-    if scene == "slab":
-        atoms, dyn, _ = load_state(shock_state(a.nx, 0.3))
-        return atoms, dyn
-    from clusterdyn.io.checkpoint import load_run
-    from debris_lammps import debris_state
-    path, _ = debris_state(a, {"contact": 400, "cloud": 1200}[scene])
-    atoms, dyn, _ = load_run(path)
-    return atoms, dyn
 
 
 def oracle_moved(atoms):
@@ -62,7 +51,7 @@ def oracle_moved(atoms):
 
 def run(scene, a, oracle):
     import clusterdyn.neighbors.celllist as CL
-    atoms, dyn = load(scene, a)
+    atoms, dyn = load_scene(scene, a)
     dyn.run(2)
     nl = atoms.calc.nl
     spent = [0.0]
@@ -96,16 +85,13 @@ def run(scene, a, oracle):
 
 def write(rows, out):
     """The table and the JSON of the scenes done so far (written after each scene)."""
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
     lines = ["| scene | N | steps | builds / 100 steps, test | oracle | builds, ns/ps (test) | step, ns/ps (test) "
              "| most a perfect test saves |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['scene']} | {r['N']} | {r['steps']} | {r['test']['builds_per_100']:.1f} | "
                      f"{r['oracle']['builds_per_100']:.1f} | {r['test']['build_ns_ps']:.1f} | "
                      f"{r['test']['step_ns_ps']:.1f} | {r['most_saved_ns_ps']:.1f} ({r['most_saved_share']:.0%}) |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    write_report(out, rows, lines)
     return lines
 
 
@@ -118,10 +104,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(RESULTS / "rebuild_oracle"))
     add_scene_args(ap, 50.0, 6.0, 35.0)
     a = ap.parse_args(argv)
-    scenes = a.scenes.split(",")
-    bad = [s for s in scenes if s not in ("slab", "contact", "cloud")]
-    if bad:
-        ap.error(f"--scenes: {bad[0]!r} is not one of slab, contact, cloud")
+    scenes = scene_list(ap, a.scenes)
     from clusterdyn.parallel import set_max_threads
     set_max_threads(1)
     rows = []
