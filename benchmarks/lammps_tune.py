@@ -315,8 +315,8 @@ def markdown(rep):
               f"skin {w['skin_r0']:g} r0, neigh_modify {w['neigh_modify']}, "
               f"{'suffix ' + w['suffix'] if w.get('suffix') else 'plain styles'}** ({w['rate']:.3g} "
               f"particle-steps/s, force error {w['force_error']:.1e}).", "",
-              "| table | points | skin / r0 | neigh_modify | suffix | force error | particle-steps/s | builds | dangerous "
-              "| eligible | load |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| table | points | skin / r0 | neigh_modify | suffix | force error | particle-steps/s | builds "
+              "| dangerous | eligible | load |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in t["rows"]:
             L.append(f"| {r['style']} | {r['points']} | {r['skin_r0']:g} | {r['neigh_modify']} | "
                      f"{r.get('suffix') or '-'} | "

@@ -206,7 +206,8 @@ def write(rows, out):
 def main(argv=None):
     from debris_cloud import add_scene_args
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", default="contact,cloud", help="contact, cloud (the 123k debris), slab (the race's state)")
+    ap.add_argument("--scenes", default="contact,cloud",
+                    help="contact, cloud (the 123k debris), slab (the race's state)")
     ap.add_argument("--nx", type=int, default=128, help="the slab's length in cells (N = 1024 nx)")
     ap.add_argument("--sides", default="8,4,2", help="brick sides in cut-offs (cutoff + skin)")
     ap.add_argument("--steps", type=int, default=100)
