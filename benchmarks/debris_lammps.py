@@ -17,12 +17,14 @@ with its force error against clusterdyn's (damping off; eligible within
 ``--tol``, 1e-4 of the largest force: the debris' compression reaches far
 up the repulsive branch, where a coarse table is off), then with the
 fastest eligible table skins ``--skins`` (multiples of r0) and
-``neigh_modify every 1|2 delay 0 check yes``; configurations with
+``neigh_modify every 1|2 delay 0 check yes``, and the three fastest of those again
+with LAMMPS' OPENMP styles on one thread (``package omp 1``, ``suffix omp``, as
+``lammps_tune.py`` tries them on the slab); configurations with
 dangerous builds are not eligible, the fastest eligible one races.  The reference of each
 engine: its own rate on the piston-shock slab of the same N (``build_shock``,
 16 x 16 cells across, from the state of ``benchmarks/_states.py`` after its
 first 100 steps, as ``debris_cloud.py`` uses), LAMMPS with the slab race's
-winner (``--slab-table``, ``--slab-skin``, ``--slab-neigh``).  Repeats interleaved; the figure
+winner (``--slab-table``, ``--slab-skin``, ``--slab-neigh``, ``--slab-suffix``).  Repeats interleaved; the figure
 is each engine's debris/slab ratio.  Results:
 ``benchmarks/results/debris_lammps.md`` and ``.json``.
 """
@@ -103,12 +105,26 @@ def tune_debris(state, state_off, a, tmp, log):
             rows.append(r)
             log(f"    LAMMPS table {best['style']} {best['points']}, skin {skin:g} r0, {neigh}: {r['rate']:.3g} "
                 f"particle-steps/s, {r['builds']} builds, dangerous {r['dangerous']}")
+    # the three fastest eligible configurations again with LAMMPS' CPU accelerator styles, as the slab race
+    top = sorted((r for r in rows if r["dangerous"] == 0), key=lambda r: -r["rate"])[:3]
+    for suffix in lt.SUFFIXES:
+        for t in top:
+            skin, neigh = t["skin_r0"], t["neigh_modify"]
+            d = lt.variant(base_j, tmp / f"v_{skin:g}_{neigh.split()[1]}_{suffix}", calc_j, best["style"],
+                           best["points"], skin * r0, neigh, tables=tables, suffix=suffix)
+            r = lt.lammps_rate(d, 1)
+            r.update({"style": best["style"], "points": best["points"], "force_error": best["force_error"],
+                      "skin_r0": skin, "neigh_modify": neigh, "suffix": suffix, "deck": str(d)})
+            rows.append(r)
+            log(f"    LAMMPS table {best['style']} {best['points']}/{suffix}, skin {skin:g} r0, {neigh}: "
+                f"{r['rate']:.3g} particle-steps/s, {r['builds']} builds, dangerous {r['dangerous']}")
     ok = [r for r in rows if r["dangerous"] == 0]
     win = max(ok, key=lambda r: r["rate"]) if ok else None
     decks = {}
     if win is not None:
         decks = {a.J: win["deck"], "none": str(lt.variant(base, tmp / "win_off", calc, win["style"], win["points"],
-                                                         win["skin_r0"] * r0, win["neigh_modify"], tables=tables))}
+                                                         win["skin_r0"] * r0, win["neigh_modify"], tables=tables,
+                                                         suffix=win.get("suffix", "")))}
     return {"tables": trows, "configs": rows, "winner": win, "r0": r0, "decks": decks}
 
 
@@ -122,9 +138,11 @@ def main(argv=None):
                     help="LAMMPS tables tried, style:points")
     ap.add_argument("--tol", type=float, default=1e-4, help="largest force error of an eligible table")
     ap.add_argument("--skins", default="0.2,0.3,0.4")
-    ap.add_argument("--slab-table", default="linear:1000", help="style:points (the slab race's winner at 128k)")
+    ap.add_argument("--slab-table", default="linear:10000", help="style:points (the slab race's winner at 128k)")
     ap.add_argument("--slab-skin", type=float, default=0.2, help="r0 (the slab race's winner at 128k)")
     ap.add_argument("--slab-neigh", default="every 2 delay 0 check yes")
+    ap.add_argument("--slab-suffix", default="omp", choices=["", *lt.SUFFIXES],
+                    help="LAMMPS accelerator suffix of the slab race's winner ('' = the plain styles)")
     ap.add_argument("--out", default=str(RESULTS / "debris_lammps"))
     a = ap.parse_args(argv)
     if a.J == "none":
@@ -151,7 +169,7 @@ def main(argv=None):
     for J in (a.J, "none"):
         base, _, r0s, calc = lt.export_base(slab, None if J == "none" else float(J), tmp / f"slab_{J}", a.steps)
         slab_w["decks"][J] = str(lt.variant(base, tmp / f"slab_win_{J}", calc, a.slab_table[0], a.slab_table[1],
-                                            a.slab_skin * r0s, a.slab_neigh))
+                                            a.slab_skin * r0s, a.slab_neigh, suffix=a.slab_suffix))
     runs = []
     for rep in range(a.repeat):
         for J in (a.J, "none"):
@@ -193,10 +211,15 @@ def markdown(rep):
             L.append(f"| {r['style']} | {r['points']} | {r['force_error']:.1e} | "
                      + (f"{r['rate']:.3g} |" if "rate" in r else "not eligible |"))
         L += ["", f"Step {w['step']}: skin and neigh_modify with the fastest eligible table", "",
-              "| table | skin / r0 | neigh_modify | particle-steps/s | builds | dangerous |", "|---|---|---|---|---|---|"]
+              "| table | skin / r0 | neigh_modify | suffix | particle-steps/s | builds | dangerous |",
+              "|---|---|---|---|---|---|---|"]
         for r in w["configs"]:
-            L.append(f"| {r['style']} {r['points']} | {r['skin_r0']:g} | {r['neigh_modify']} | {r['rate']:.3g} | "
-                     f"{r['builds']} | {r['dangerous']} |")
+            L.append(f"| {r['style']} {r['points']} | {r['skin_r0']:g} | {r['neigh_modify']} | "
+                     f"{r.get('suffix') or '-'} | {r['rate']:.3g} | {r['builds']} | {r['dangerous']} |")
+        win = w.get("winner")
+        if win is not None:
+            L.append(f"\nWinner: table {win['style']} {win['points']}, skin {win['skin_r0']:g} r0, "
+                     f"{win['neigh_modify']}, {'suffix ' + win['suffix'] if win.get('suffix') else 'plain styles'}.")
         L.append("")
     L += ["## Rates and each engine's debris/slab ratio", "",
           "Particle-steps per second of the wall clock (LAMMPS' loop time; clusterdyn's run).", "",
