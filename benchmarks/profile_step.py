@@ -13,8 +13,13 @@ efficiency (median of the rounds' own).  "other" is the rest of the step:
 Python, constraints and checks.  The timers add a few microseconds a call.
 ``--clock process`` times with the process' CPU time instead of the wall
 clock (one thread only: on a loaded machine it leaves out the time the
-process waited for a core).  The script profiles whatever ``clusterdyn`` is
-imported, so ``PYTHONPATH=/path/to/other/tree`` profiles another version.
+process waited for a core).  ``--sort-every-build`` sorts the Atoms into
+the list's row order after every step that rebuilt the list
+(:meth:`clusterdyn.md.DampedVerlet.sort_atoms`, timed as "sorts"), so that
+the list's permutation is the identity between builds.  The first line gives
+the listed pairs per particle (the pair loop's work) beside the builds.  The
+script profiles whatever ``clusterdyn`` is imported, so
+``PYTHONPATH=/path/to/other/tree`` profiles another version.
 """
 
 import argparse
@@ -38,6 +43,8 @@ def main(argv=None):
                     help="start from the saved state with this fraction shocked (instead of --warmup steps)")
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--clock", choices=("wall", "process"), default="wall")
+    ap.add_argument("--sort-every-build", action="store_true",
+                    help="sort the Atoms into the list's row order after every step that rebuilt the list")
     a = ap.parse_args(argv)
 
     import clusterdyn
@@ -58,7 +65,7 @@ def main(argv=None):
             return r
         return g
 
-    parts = ("force loop", "list builds", "kick-drift-gather", "force sum")
+    parts = ("force loop", "list builds", "kick-drift-gather", "force sum") + (("sorts",) if a.sort_every_build else ())
     for key in list(K.KERNELS):
         K.KERNELS[key] = timed(parts[0], K.KERNELS[key])
     CL.NeighborList.build = timed(parts[1], CL.NeighborList.build)
@@ -78,8 +85,20 @@ def main(argv=None):
         atoms, dyn, extra = load_state(shock_state(a.nx, a.fraction), J=J)
         dyn.run(2)
         where = f"from step {dyn.nsteps - 2}, {extra['shocked_fraction']:.0%} shocked"
+    if a.sort_every_build:
+        dyn.set_sort_interval(10 ** 9)      # readies the Atoms for sorts; the observer below sorts
+        sort = timed("sorts", dyn.sort_atoms)
+        last = [atoms.calc.nl.nbuilds]
+
+        def sort_after_build():
+            if atoms.calc.nl.nbuilds != last[0]:
+                sort()
+                last[0] = atoms.calc.nl.nbuilds
+        dyn.attach(sort_after_build, interval=1)
+        sort()
     n = len(atoms)
     threads = [int(t) for t in a.threads.split(",")]
+    pairs = []
     per = {t: {} for t in threads}
     builds = {t: 0 for t in threads}
     for _ in range(a.rounds):
@@ -91,6 +110,7 @@ def main(argv=None):
             dyn.run(a.steps)
             acc["whole step"] = clock() - t0
             builds[th] += atoms.calc.nl.nbuilds - nb0
+            pairs.append(atoms.calc.nl.npairs / n)
             acc["other"] = acc["whole step"] - sum(acc.get(p, 0.0) for p in parts)
             for k in parts + ("other", "whole step"):
                 per[th].setdefault(k, []).append(acc.get(k, 0.0) / (a.steps * n) * 1e9)
@@ -99,6 +119,8 @@ def main(argv=None):
           f"of {a.steps} steps on {', '.join(map(str, threads))} thread(s), {a.clock} clock; ns per particle and "
           f"step, medians over rounds; list builds per 100 steps: "
           + ", ".join(f"{100 * builds[t] / (a.rounds * a.steps):.1f}" for t in threads)
+          + f"; listed pairs per particle {np.median(pairs):.2f}"
+          + ("; Atoms sorted after every build" if a.sort_every_build else "")
           + f"; load average {os.getloadavg()[0]:.1f}")
     head = "| part | " + " | ".join(f"{t} thread(s)" for t in threads) + (" | efficiency |" if len(threads) == 2 else " |")
     print(head + "\n|" + "---|" * (len(threads) + 1 + (len(threads) == 2)))
