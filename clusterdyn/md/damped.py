@@ -235,10 +235,9 @@ class DampedVerlet(MolecularDynamics):
         #: pair energy (eV), momentum (3,) (amu Angstrom / ASE time)
         self.removed = {"count": 0, "mass": 0.0, "kinetic": 0.0, "potential": 0.0, "momentum": np.zeros(3)}
         self.J = J
-        self.calc = calc
+        self._take_calc(calc, limit)
         speeds = [c.max_speed() for c in atoms.constraints if isinstance(c, Drive)]
         u_max = max([s for s in speeds if s is not None] + [0.0])
-        self.stability_limit = limit
         if timestep is None:
             if not isinstance(calc, ClusterDynamics):
                 raise InputError("timestep", None, "a time step (no default without ClusterDynamics)")
@@ -259,12 +258,8 @@ class DampedVerlet(MolecularDynamics):
         super().__init__(atoms, ts, trajectory=trajectory, logfile=logfile, loginterval=loginterval,
                          **kwargs)
         self.check_interval = int(check_interval)
-        self.forces = None
         self._own_forces = False
-        self._epot = None
-        self._eta = calc.damping_matrix(J) if J is not None else None
         self._fbuf = None
-        self._safe = {}
         self.timings = {"forces": 0.0, "integrate": 0.0}
         #: energy the pair damping has removed, eV (dt times the dissipated power
         #: ``sum eta |v_i - v_j|^2`` of each step's force pass, half-step velocities)
@@ -295,6 +290,11 @@ class DampedVerlet(MolecularDynamics):
         if limit is not None and self.dt > limit:
             raise InputError("atoms.calc", type(calc).__name__, f"a calculator whose stability limit "
                              f"({limit:.6g}) is at least the dynamics' time step {self.dt:.6g}")
+        self._take_calc(calc, limit)
+
+    def _take_calc(self, calc, limit):
+        """Use ``calc`` (checked, with its stability limit ``limit``): its damping matrix for
+        :attr:`J`, and nothing kept of the previous calculator's (forces, energy, safe distances)."""
         self.calc = calc
         self.stability_limit = limit
         self._eta = calc.damping_matrix(self.J) if self.J is not None else None
