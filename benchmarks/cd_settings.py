@@ -52,21 +52,22 @@ def main(argv=None):
         configs.insert(0, (skin0, N_BINS))
     ref = atoms.get_forces()
     fmax = np.abs(ref).max()
+
+    def configure(atoms, skin, nt):
+        """The Atoms' calculator replaced by one with this skin and table, the rest as saved (a
+        dynamics on them takes it up at its next step)."""
+        atoms.calc = ClusterDynamics(**dict(atoms.calc.parameters, skin=skin, n_table=nt))
+
     err = {}
     for skin, nt in configs:
-        p = dict(atoms.calc.parameters)
-        p.update(skin=skin, n_table=nt)
-        atoms.calc = ClusterDynamics(**p)
+        configure(atoms, skin, nt)
         err[skin, nt] = float(np.abs(atoms.get_forces() - ref).max() / fmax)
     rates = {c: [] for c in configs}
     builds = {c: [] for c in configs}
     for rep in range(a.repeat):
         for skin, nt in configs:
             atoms, dyn, _ = load_state(path)
-            p = dict(atoms.calc.parameters)
-            p.update(skin=skin, n_table=nt)
-            atoms.calc = ClusterDynamics(**p)
-            dyn.forces = None
+            configure(atoms, skin, nt)
             dyn.run(a.warm)
             b0 = atoms.calc.nl.nbuilds
             t0 = time.process_time()

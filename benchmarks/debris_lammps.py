@@ -95,36 +95,33 @@ def tune_debris(state, state_off, a, tmp, log):
         return {"tables": trows, "configs": [], "winner": None, "r0": r0}
     best = max(ok, key=lambda r: r["rate"])
     rows = []
+
+    def try_config(skin, neigh, suffix=""):
+        tag = f"v_{skin:g}_{neigh.split()[1]}" + (f"_{suffix}" if suffix else "")
+        d = lt.variant(base_j, tmp / tag, calc_j, best["style"], best["points"], skin * r0, neigh, tables=tables,
+                       suffix=suffix)
+        r = lt.lammps_rate(d, 1)
+        r.update({"style": best["style"], "points": best["points"], "force_error": best["force_error"],
+                  "skin_r0": skin, "neigh_modify": neigh, "suffix": suffix, "deck": str(d)})
+        rows.append(r)
+        log(f"    LAMMPS table {best['style']} {best['points']}{'/' + suffix if suffix else ''}, skin {skin:g} r0, "
+            f"{neigh}: {r['rate']:.3g} particle-steps/s, {r['builds']} builds, dangerous {r['dangerous']}")
+
     for skin in a.skins:
         for neigh in ("every 1 delay 0 check yes", "every 2 delay 0 check yes"):
-            d = lt.variant(base_j, tmp / f"v_{skin:g}_{neigh.split()[1]}", calc_j, best["style"], best["points"],
-                           skin * r0, neigh, tables=tables)
-            r = lt.lammps_rate(d, 1)
-            r.update({"style": best["style"], "points": best["points"], "force_error": best["force_error"],
-                      "skin_r0": skin, "neigh_modify": neigh, "deck": str(d)})
-            rows.append(r)
-            log(f"    LAMMPS table {best['style']} {best['points']}, skin {skin:g} r0, {neigh}: {r['rate']:.3g} "
-                f"particle-steps/s, {r['builds']} builds, dangerous {r['dangerous']}")
+            try_config(skin, neigh)
     # the three fastest eligible configurations again with LAMMPS' CPU accelerator styles, as the slab race
-    top = sorted((r for r in rows if r["dangerous"] == 0), key=lambda r: -r["rate"])[:3]
+    top = lt.fastest(rows, lambda r: r["dangerous"] == 0)
     for suffix in lt.SUFFIXES:
         for t in top:
-            skin, neigh = t["skin_r0"], t["neigh_modify"]
-            d = lt.variant(base_j, tmp / f"v_{skin:g}_{neigh.split()[1]}_{suffix}", calc_j, best["style"],
-                           best["points"], skin * r0, neigh, tables=tables, suffix=suffix)
-            r = lt.lammps_rate(d, 1)
-            r.update({"style": best["style"], "points": best["points"], "force_error": best["force_error"],
-                      "skin_r0": skin, "neigh_modify": neigh, "suffix": suffix, "deck": str(d)})
-            rows.append(r)
-            log(f"    LAMMPS table {best['style']} {best['points']}/{suffix}, skin {skin:g} r0, {neigh}: "
-                f"{r['rate']:.3g} particle-steps/s, {r['builds']} builds, dangerous {r['dangerous']}")
+            try_config(t["skin_r0"], t["neigh_modify"], suffix)
     ok = [r for r in rows if r["dangerous"] == 0]
     win = max(ok, key=lambda r: r["rate"]) if ok else None
     decks = {}
     if win is not None:
         decks = {a.J: win["deck"], "none": str(lt.variant(base, tmp / "win_off", calc, win["style"], win["points"],
                                                          win["skin_r0"] * r0, win["neigh_modify"], tables=tables,
-                                                         suffix=win.get("suffix", "")))}
+                                                         suffix=win["suffix"]))}
     return {"tables": trows, "configs": rows, "winner": win, "r0": r0, "decks": decks}
 
 

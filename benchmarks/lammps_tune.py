@@ -184,6 +184,11 @@ def _run_cd(state, J, threads, steps, sort_interval=0):
     return r
 
 
+def fastest(rows, eligible, k=3):
+    """The ``k`` fastest rows (by ``"rate"``) for which ``eligible(row)`` holds, fastest first."""
+    return sorted((r for r in rows if eligible(r)), key=lambda r: -r["rate"])[:k]
+
+
 # -- the run ---------------------------------------------------------------------------------------
 
 def tune(nx, state, steps, tol, tmp, quick=False, log=print):
@@ -230,13 +235,11 @@ def tune(nx, state, steps, tol, tmp, quick=False, log=print):
     for neigh in (NEIGH[1:] if not quick else NEIGH[1:3]):
         try_config(best_tab["style"], best_tab["points"], best_skin, neigh)
     # the three fastest eligible configurations with each accelerator suffix
-    ok = sorted([r for r in rows if r["eligible"]], key=lambda r: -r["rate"])[:3]
     for suffix in SUFFIXES:
-        for r in ok:
+        for r in fastest(rows, lambda r: r["eligible"]):
             try_config(r["style"], r["points"], r["skin_r0"], r["neigh_modify"], suffix)
     # the three fastest eligible configurations, timed again (one run each is noisy)
-    ok = sorted([r for r in rows if r["eligible"]], key=lambda r: -r["rate"])[:3]
-    for r in ok:
+    for r in fastest(rows, lambda r: r["eligible"]):
         again = try_config(r["style"], r["points"], r["skin_r0"], r["neigh_modify"], r["suffix"])
         again["repeat_of"] = rows.index(r)
     # best of the repeats per configuration
