@@ -379,34 +379,46 @@ def _lower(ukey, target, cur, r):
 
 
 @njit(inline="always")
-def _scan_packed(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, bits, rcut2, cap, scr_rk, cnt_r):
-    """Partners of rows a0..a1 among rows b0..b1 (shifted by -s) into the scratch rows
-    ``scr_rk[i - a0]`` as ``j | bits`` (the image code in the high bits); ``own``: only j > i."""
+def _scan_rows(xs_nc, a0, a1, bx, by, bz, bp, hit, nbuf, rcut2, pool_p, pos, end, first_n):
+    """Partners of the cell's rows a0..a1 among its stencil's candidates ``b*[:nbuf]`` (the
+    own cell's rows first, from row a0 on: row i's candidates are ``b*[i - a0 + 1:nbuf]``),
+    written as ``bp[u]`` one row after another into ``pool_p[pos:end]`` (counted beyond
+    ``end``, not written); returns the next free position.  Two passes a row: the distance
+    test into ``hit`` (contiguous arrays: LLVM vectorises it), then a branch-free compaction
+    (every candidate is written at the next free slot, which only a hit keeps)."""
+    nbu = np.uint64(nbuf)
     for i in range(a0, a1):
-        xi = xs_nc[i, 0] - sx
-        yi = xs_nc[i, 1] - sy
-        zi = xs_nc[i, 2] - sz
-        t = i - a0
-        cnt = cnt_r[t]
-        q0 = b0
-        if own:
-            q0 = i + 1
-        for j in range(q0, b1):
-            ju = np.uint64(j)
-            dx = xs_nc[ju, 0] - xi
-            dy = xs_nc[ju, 1] - yi
-            dz = xs_nc[ju, 2] - zi
-            # branch-free: every candidate is written at the next free slot,
-            # which only a hit keeps (a hit or miss is a coin toss here)
-            if cnt < cap:
-                scr_rk[t, cnt] = np.uint32(j) | bits
-            cnt += 1 if dx * dx + dy * dy + dz * dz < rcut2 else 0
-        cnt_r[t] = cnt
+        u0 = np.uint64(i - a0 + 1)
+        xi = xs_nc[i, 0]
+        yi = xs_nc[i, 1]
+        zi = xs_nc[i, 2]
+        for u in range(u0, nbu):
+            dx = bx[u] - xi
+            dy = by[u] - yi
+            dz = bz[u] - zi
+            hit[u] = np.uint32(1) if dx * dx + dy * dy + dz * dz < rcut2 else np.uint32(0)
+        cnt = np.uint64(0)
+        pu = np.uint64(pos)
+        room = max(end - pos, 0)
+        if nbuf - (i - a0 + 1) <= room:
+            for u in range(u0, nbu):
+                pool_p[pu + cnt] = bp[u]
+                cnt += np.uint64(hit[u])
+        else:
+            roomu = np.uint64(room)
+            for u in range(u0, nbu):
+                if cnt < roomu:
+                    pool_p[pu + cnt] = bp[u]
+                cnt += np.uint64(hit[u])
+        k = np.int64(cnt)
+        first_n[i + 1] = k
+        pos += k
+    return pos
 
 
 @njit(cache=True, parallel=True)
 def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4, slotbox_s3, slotmult_s,
-                rcut2, cap, shift, cblk_b, slab_b, maxrows, pool_p, first_n, need_b):
+                rcut2, shift, cblk_b, slab_b, maxrows, pool_p, first_n, need_b):
     """Half list over sorted particles in one pass: own cell (j > i) + 13 forward cells.
 
     Cells are indexed in "slot" order (slot 0 slowest); ``nslot``/``periodic_s`` are
@@ -414,18 +426,24 @@ def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4,
     vector of each slot's axis and ``slotmult_s`` its weight in the 3x3x3 image
     code.  Valid when every periodic slot has >= 3 cells of size >= the cut-off.
     The forward stencil is walked as runs of cells along the fastest slot
-    (``runs_r4`` = d0, d1, first and last d2; :data:`HALF_RUNS`): cells of a
-    run are consecutive rows, so a run is one scan unless it wraps a periodic
-    face.  The rows of the cells of a run are found in the dense starts
-    ``dstart`` or, with ``sparse``, among the occupied cells ``ukey`` (a cursor
-    per run walks them forward).
+    (``runs_r4`` = d0, d1, first and last d2; :data:`HALF_RUNS`, whose first run
+    starts at the own cell): cells of a run are consecutive rows, so a run is one
+    segment of rows unless it wraps a periodic face.  The rows of a segment are
+    found in the dense starts ``dstart`` or, with ``sparse``, among the occupied
+    cells ``ukey`` (a cursor per run walks them forward).
+
+    For each occupied cell the segments' rows are copied, in stencil order, into
+    contiguous candidate arrays (at most the stencil's 14 cells times
+    ``maxrows``, the most rows of a cell), each with its periodic image added to
+    its position, and each of the cell's rows is tested against them in one scan
+    (:func:`_scan_rows`): one long loop a row instead of a short one per segment,
+    with the distance test vectorised.
 
     Work is split into blocks of occupied cells (``cblk_b``); block b writes its
     rows' partners, in stencil order, one after the other into its slab
     ``pool_p[slab_b[b]:slab_b[b+1]]`` as ``j | code << shift`` (uint32), row i's
-    count into ``first_n[i + 1]`` and what it needed into ``need_b[b]``.  Rows
-    are gathered per cell in a scratch of ``cap`` partners per row.  Returns the
-    largest row count: above ``cap`` (or a block needing more than its slab) the
+    count into ``first_n[i + 1]`` and what it needed into ``need_b[b]``: a block
+    that needs more than its slab counts its pairs without writing them, and the
     caller retries with more room.
     """
     m0 = nslot[0]
@@ -434,23 +452,25 @@ def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4,
     nr = runs_r4.shape[0]
     nq = ukey.shape[0]
     nblk = cblk_b.shape[0] - 1
-    rowmax_b = np.zeros(nblk, np.int64)
+    ncand = 0
+    for r in range(nr):
+        ncand += runs_r4[r, 3] - runs_r4[r, 2] + 1
+    bcap = ncand * maxrows
     for b in prange(nblk):
-        scr = np.empty((maxrows, cap), np.uint32)
-        lc = np.zeros(maxrows, np.int64)
+        bx = np.empty(bcap)
+        by = np.empty(bcap)
+        bz = np.empty(bcap)
+        bp = np.empty(bcap, np.uint32)
+        hit = np.empty(bcap, np.uint32)
         cur = np.full(nr, -1, np.int64)
         pos = slab_b[b]
         end = slab_b[b + 1]
-        rmax = 0
         for q in range(cblk_b[b], cblk_b[b + 1]):
-            a0 = ustart[q]
-            a1 = ustart[q + 1]
-            for t in range(a1 - a0):
-                lc[t] = 0
             c = ukey[q]
             g2 = c % m2
             g1 = (c // m2) % m1
             g0 = c // (m2 * m1)
+            nbuf = 0
             for r in range(nr):
                 h0 = g0 + runs_r4[r, 0]
                 h1 = g1 + runs_r4[r, 1]
@@ -499,33 +519,27 @@ def _fill_slabs(xs_nc, ukey, ustart, dstart, sparse, nslot, periodic_s, runs_r4,
                         else:
                             b0 = dstart[base + seg_lo]
                             b1 = dstart[base + seg_hi + 1]
-                        if b1 > b0:
-                            own = r == 0 and base + seg_lo == c
-                            sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + seg_i2 * slotbox_s3[2, 0]
-                            sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + seg_i2 * slotbox_s3[2, 1]
-                            sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + seg_i2 * slotbox_s3[2, 2]
-                            code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + seg_i2 * slotmult_s[2]
-                            bits = np.uint32(code) << np.uint32(shift)
-                            _scan_packed(xs_nc, a0, a1, b0, b1, own, sx, sy, sz, bits, rcut2, cap, scr, lc)
+                        sx = i0 * slotbox_s3[0, 0] + i1 * slotbox_s3[1, 0] + seg_i2 * slotbox_s3[2, 0]
+                        sy = i0 * slotbox_s3[0, 1] + i1 * slotbox_s3[1, 1] + seg_i2 * slotbox_s3[2, 1]
+                        sz = i0 * slotbox_s3[0, 2] + i1 * slotbox_s3[1, 2] + seg_i2 * slotbox_s3[2, 2]
+                        code = 13 + i0 * slotmult_s[0] + i1 * slotmult_s[1] + seg_i2 * slotmult_s[2]
+                        bits = np.uint32(code) << np.uint32(shift)
+                        for j in range(b0, b1):
+                            ju = np.uint64(j)
+                            w = np.uint64(nbuf)
+                            bx[w] = xs_nc[ju, 0] + sx
+                            by[w] = xs_nc[ju, 1] + sy
+                            bz[w] = xs_nc[ju, 2] + sz
+                            bp[w] = np.uint32(j) | bits
+                            nbuf += 1
                     seg_lo = -1
                     if ok:
                         seg_lo = h2
                         seg_hi = h2
                         seg_i2 = i2
-            for t in range(a1 - a0):
-                k = lc[t]
-                first_n[a0 + t + 1] = k
-                rmax = max(rmax, k)
-                if k <= cap and pos + k <= end:
-                    for u in range(k):
-                        pool_p[pos + u] = scr[t, u]
-                pos += k
+            pos = _scan_rows(xs_nc, ustart[q], ustart[q + 1], bx, by, bz, bp, hit, nbuf, rcut2, pool_p, pos, end,
+                             first_n)
         need_b[b] = pos - slab_b[b]
-        rowmax_b[b] = rmax
-    m = 0
-    for b in range(nblk):
-        m = max(m, rowmax_b[b])
-    return m
 
 
 def _carried_need(need_b, rows_b, new_rows_b, mean):
@@ -1178,7 +1192,6 @@ class NeighborList:
         self._j_p = None
         self._img_p = None
         self._key = None
-        self._cap = 0
         self._pool = np.empty(0, np.uint32)
         self._slab_need = None
         self._slab_rows = None
@@ -1445,7 +1458,6 @@ class NeighborList:
         slotmult = np.array([9, 3, 1], np.int64)[axes]
         cblk, rows_b, maxrows = _cell_blocks(ustart, FILL_BLOCK_ROWS)
         need = self._slab_need
-        cap = self._cap or 16
         first_n = self.first_n
         nblk = rows_b.shape[0]
         mean, top = self._ppr
@@ -1461,15 +1473,12 @@ class NeighborList:
             np.cumsum(est, out=slab[1:])
             self._reserve_pool(int(slab[-1]))
             need_b = np.empty(nblk, np.int64)
-            m = _fill_slabs(xs, ukey, ustart, dstart, sparse, nslot, periodic_s, HALF_RUNS, slotbox, slotmult,
-                            rcut * rcut, cap, HALF_SHIFT, cblk, slab, maxrows, self._pool, first_n, need_b)
-            if m > cap:
-                cap = int(m * 1.25) + 4
-            elif np.any(need_b > est):
+            _fill_slabs(xs, ukey, ustart, dstart, sparse, nslot, periodic_s, HALF_RUNS, slotbox, slotmult,
+                        rcut * rcut, HALF_SHIFT, cblk, slab, maxrows, self._pool, first_n, need_b)
+            if np.any(need_b > est):
                 est = np.maximum(est, (need_b * SLAB_MARGIN).astype(np.int64) + 64)
             else:
                 break
-        self._cap = cap
         self._slab_need = need_b
         self._slab_rows = rows_b
         self._ppr = (float(need_b.sum() / max(n, 1)), float((need_b / np.maximum(rows_b, 1)).max()))
