@@ -391,8 +391,8 @@ class ClusterDynamics(Calculator):
     def _advance(self, atoms, momenta, forces, invm, h, dt, damped):
         """The dynamics' first half kick and drift fused with the next pair loop's gathers.
 
-        ``momenta += h forces; positions += dt momenta/m`` in the list's row
-        order (:func:`clusterdyn.neighbors.celllist.kick_drift_gather`), with the
+        ``momenta += h forces; positions += dt momenta/m``
+        (:func:`clusterdyn.neighbors.celllist.kick_drift_gather`), with the
         sorted positions (and velocities if ``damped``) and the rebuild test's
         displacements taken in the same pass; the next :meth:`compute` on these
         positions uses them.  Returns (max v^2, its particle), or None when the
@@ -402,7 +402,7 @@ class ClusterDynamics(Calculator):
         pos = atoms.arrays["positions"]
         n = len(atoms)
         lay = self._buffers
-        if (nl is None or nl.perm_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
+        if (nl is None or nl.perm_n is None or nl.row_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
                 or lay is None or lay["n"] != n or self._setup_key is None or pos.dtype != np.float64
                 or not pos.flags.c_contiguous or not momenta.flags.c_contiguous
                 or not forces.flags.c_contiguous or momenta.dtype != np.float64
@@ -414,7 +414,7 @@ class ClusterDynamics(Calculator):
             self._bstat = np.empty((nb, 9))
         use_threads(n)
         self._ncompute += 1  # the sorted positions change: last_stats' lazy "closest" expires
-        v2max, k, m2, h2 = kick_drift_gather(momenta, forces, pos, invm, h, dt, nl.perm_n, nl.offs_nc,
+        v2max, k, m2, h2 = kick_drift_gather(momenta, forces, pos, invm, h, dt, nl.row_n, nl.offs_nc,
                                              nl.ref_nc, lay["xs"], lay["vs"] if damped else self._NO_V,
                                              self._bstat)
         self._advanced = (id(pos), nl.nbuilds, m2, h2, damped, self._setup_key)

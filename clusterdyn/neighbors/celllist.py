@@ -228,14 +228,16 @@ def _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n):
 
 
 @njit(cache=True, parallel=True)
-def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc):
-    """Sorted wrapped positions and wrap offsets of the rows of ``perm``, in parallel."""
+def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc, row_n):
+    """Sorted wrapped positions of the rows of ``perm``, and each particle's wrap offset and row
+    (caller's order: ``offs_nc[i]``, ``row_n[i]``), in parallel."""
     for k in prange(perm.shape[0]):
         i = perm[k]
+        row_n[i] = k
         for d in range(3):
             w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
             xs_nc[k, d] = w
-            offs_nc[k, d] = w - pos_nc[i, d]
+            offs_nc[i, d] = w - pos_nc[i, d]
 
 
 @njit(cache=True)
@@ -332,12 +334,13 @@ def _radix_sort(key, perm, scr):
     return key0[:m], ustart
 
 
-def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, key_n, sparse):
+def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, xs_nc, offs_nc, row_n, key_n,
+               sparse):
     """Sort of the particles by cell (slot 0 slowest), stable in the original order: a counting
     sort over the dense grid, or with ``sparse`` a radix sort of the cell keys (memory O(N)
     whatever the number of cells of the bounding box; the same order).  Fills ``perm`` (sorted
-    row k is particle perm[k]), the sorted wrapped positions ``xs_nc`` and wrap offsets
-    ``offs_nc``; returns the occupied cells ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds
+    row k is particle perm[k]), the sorted wrapped positions ``xs_nc``, and the particles' wrap
+    offsets ``offs_nc`` and rows ``row_n`` (both in the caller's order); returns the occupied cells ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds
     rows ustart[q]..ustart[q+1]) and the dense row starts (ncell + 1; empty with ``sparse``).
     The keys (into the scratch ``key_n``) and the gather run in parallel, the sort in one thread."""
     _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
@@ -346,7 +349,7 @@ def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, x
         dstart = np.empty(0, np.int64)
     else:
         ukey, ustart, dstart = _count_sort(key_n, int(ncell_c[0] * ncell_c[1] * ncell_c[2]), perm)
-    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc)
+    _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc, row_n)
     return ukey, ustart, dstart
 
 
@@ -621,14 +624,14 @@ def _pack(j_p, img_p, shift, out_p):
 
 @njit(cache=True, parallel=True)
 def gather_positions(pos_nc, perm, offs_nc, xs_nc):
-    """xs[k] = pos[perm[k]] + offset[k]: sorted wrapped positions for the kernels."""
+    """xs[k] = pos[i] + offset[i], i = perm[k]: sorted wrapped positions for the kernels."""
     n = perm.shape[0]
     for b in prange((n + BLOCK - 1) // BLOCK):
         for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
             i = np.uint64(perm[k])
-            xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[k, 0]
-            xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[k, 1]
-            xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[k, 2]
+            xs_nc[k, 0] = pos_nc[i, 0] + offs_nc[i, 0]
+            xs_nc[k, 1] = pos_nc[i, 1] + offs_nc[i, 1]
+            xs_nc[k, 2] = pos_nc[i, 2] + offs_nc[i, 2]
 
 
 @njit(cache=True, parallel=True)
@@ -680,11 +683,11 @@ def _disp_result(rows_b7):
 
 
 @njit(cache=True, parallel=True)
-def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs_nc, vs_nc, bstat_b9):
-    """The first half of a velocity-Verlet step fused with the pair loop's gathers, in row order.
+def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, row_n, offs_nc, ref_nc, xs_nc, vs_nc, bstat_b9):
+    """The first half of a velocity-Verlet step fused with the pair loop's gathers.
 
-    For sorted row k, particle i = perm[k]: ``p[i] += h f[i]``, ``x[i] += dt p[i]/m[i]``,
-    then ``xs[k] = x[i] + offs[k]`` (as :func:`gather_positions`) and, when
+    For particle i, of sorted row k = row_n[i]: ``p[i] += h f[i]``, ``x[i] += dt p[i]/m[i]``,
+    then ``xs[k] = x[i] + offs[i]`` (as :func:`gather_positions`) and, when
     ``vs_nc`` has rows, ``vs[k] = p[i]/m[i]`` (as :func:`gather_velocities`).  The
     arithmetic per particle is that of the separate kick, drift and gathers, so
     the results are the same bit for bit.  Returns (max v^2, its particle,
@@ -693,16 +696,21 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
     with ``displacement=``) without another pass.  Maxima are over fixed blocks
     in block order (independent of the thread count); a NaN speed or
     displacement comes back as the maximum (inf for the displacement).
+
+    The pass runs in the caller's order, so that the particles' arrays (momenta, forces,
+    positions, masses, reference positions, offsets) stream and only the sorted rows are
+    written at scattered places: 5% off the 128k slab's step against the same pass in row
+    order (docs/performance.md, stop 25).
     """
-    n = perm.shape[0]
+    n = row_n.shape[0]
     nb = (n + BLOCK - 1) // BLOCK
     damp = vs_nc.shape[0] > 0
     for b in prange(nb):
         m = -1.0
         kk = -1
         acc = _disp_start()
-        for k in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
-            i = np.uint64(perm[k])
+        for i in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+            k = np.uint64(row_n[i])
             p_nc[i, 0] += h * f_nc[i, 0]
             p_nc[i, 1] += h * f_nc[i, 1]
             p_nc[i, 2] += h * f_nc[i, 2]
@@ -716,14 +724,14 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, perm, offs_nc, ref_nc, xs
             x_nc[i, 0] = x
             x_nc[i, 1] = y
             x_nc[i, 2] = z
-            xs_nc[k, 0] = x + offs_nc[k, 0]
-            xs_nc[k, 1] = y + offs_nc[k, 1]
-            xs_nc[k, 2] = z + offs_nc[k, 2]
+            xs_nc[k, 0] = x + offs_nc[i, 0]
+            xs_nc[k, 1] = y + offs_nc[i, 1]
+            xs_nc[k, 2] = z + offs_nc[i, 2]
             if damp:
                 vs_nc[k, 0] = vx
                 vs_nc[k, 1] = vy
                 vs_nc[k, 2] = vz
-            m, kk = max_take(m, kk, vx * vx + vy * vy + vz * vz, perm[k])
+            m, kk = max_take(m, kk, vx * vx + vy * vy + vz * vz, i)
             acc = _disp_add(acc, x - ref_nc[i, 0], y - ref_nc[i, 1], z - ref_nc[i, 2])
         bstat_b9[b, 0] = m
         bstat_b9[b, 1] = kk
@@ -1144,8 +1152,11 @@ class NeighborList:
         Bit position of the image code in :attr:`jp_p` (27 for the half-stencil list).
     perm_n : (N,) int64 or None
         With ``sort``: sorted row k is particle ``perm_n[k]``.
+    row_n : (N,) int64 or None
+        With ``sort``: the inverse, particle i is sorted row ``row_n[i]``.
     offs_nc : (N, 3) float64
-        With ``sort``: wrap offsets of the sorted rows.
+        With ``sort``: wrap offsets of the particles (caller's order; the buffer
+        behind :attr:`offset_nc`).
     xs_nc : (N, 3) float64
         With ``sort``: a buffer of sorted positions (wrapped positions at the
         build; the Cluster Dynamics calculator gathers each step's into it).
@@ -1183,6 +1194,7 @@ class NeighborList:
         self._store = None
         self._key_store = None
         self.perm_n = None
+        self.row_n = None
         self.layer_rows = 0
         self.jp_p = None
         self.img_shift = 0
@@ -1404,6 +1416,7 @@ class NeighborList:
         self.first_n, self._j_p, self._img_p = first_n, j_p, img_p
         self.jp_p = None
         self.perm_n = None
+        self.row_n = None
         self.layer_rows = 0
         self._offset_nc = wpos - pos
         self.last_cells = "coarse"
@@ -1419,10 +1432,12 @@ class NeighborList:
         """The sorted rows' arrays for n particles: views of buffers kept across builds, which
         grow but never shrink, so that removing particles allocates nothing (every build writes
         every row of them)."""
-        xs, offs, perm, first = self._store or (None,) * 4
-        self._store = (grown(xs, n), grown(offs, n), grown(perm, n, (), np.int64), grown(first, n + 1, (), np.int64))
-        xs, offs, perm, first = self._store
+        xs, offs, perm, first, row = self._store or (None,) * 5
+        self._store = (grown(xs, n), grown(offs, n), grown(perm, n, (), np.int64), grown(first, n + 1, (), np.int64),
+                       grown(row, n, (), np.int64))
+        xs, offs, perm, first, row = self._store
         self.xs_nc, self.offs_nc, self.perm_n, self.first_n = xs[:n], offs[:n], perm[:n], first[:n + 1]
+        self.row_n = row[:n]
         return self.perm_n, self.xs_nc, self.offs_nc
 
     def _build_sorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
@@ -1445,7 +1460,7 @@ class NeighborList:
         dense_cells = float(np.prod(ncell.astype(float)))
         sparse = (self.cells == "sparse"
                   or (self.cells == "auto" and dense_cells > DENSE_CELLS_PER_PARTICLE * max(n, 1) + 27))
-        ukey, ustart, dstart = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+        ukey, ustart, dstart = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self.row_n,
                                           self._keys(n), sparse)
         if n >= 2 ** HALF_SHIFT:
             raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
@@ -1498,7 +1513,7 @@ class NeighborList:
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
         cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        ukey, ustart, _ = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs,
+        ukey, ustart, _ = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self.row_n,
                                      self._keys(n), False)
         self.layer_rows = int(_layer_rows(ukey, ustart, ncell[axes[1]] * ncell[axes[2]]))
         first_n = self.first_n
@@ -1546,22 +1561,22 @@ class NeighborList:
         """Wrap offsets at the last build, in the caller's particle order."""
         if self.perm_n is None:
             return self._offset_nc
-        off = np.empty_like(self.offs_nc)
-        off[self.perm_n] = self.offs_nc
-        return off
+        return self.offs_nc.copy()
 
     def renumber(self, scratch):
         """The caller has reordered its particles into the list's row order (new particle k is
         old particle ``perm_n[k]``).  The list stays valid without a rebuild: its rows, pairs and
-        sorted arrays are untouched; the reference positions and the bricks of the local test
-        follow, and the row permutation becomes the identity.  ``scratch``: a
+        sorted arrays are untouched; the reference positions, the wrap offsets and the bricks of
+        the local test follow, and the row permutation and its inverse become the identity.  ``scratch``: a
         :func:`clusterdyn.buffers.grown` buffer for :func:`clusterdyn.buffers.permute`."""
         if self.ref_nc is None or self.perm_n is None or self.ref_nc.shape[0] != self.perm_n.shape[0]:
             raise InputError("renumber", "a list not built over the current particles", "a built, sorted list")
         permute(self.ref_nc, self.perm_n, scratch)
+        permute(self.offs_nc, self.perm_n, scratch)
         if self._bricks is not None:
             permute(self._bricks[0], self.perm_n, scratch)
         _identity(self.perm_n)
+        _identity(self.row_n)
 
     def scratch(self, n):
         """A scratch of ``n`` rows of :data:`~clusterdyn.buffers.PERMUTE_WORDS` float64 words for

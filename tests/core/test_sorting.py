@@ -78,6 +78,45 @@ def test_sorted_atoms_run_the_same_trajectory(tmp_path):
     assert np.allclose(pos[1], pos10, rtol=1e-6, atol=0)
 
 
+def test_sorted_periodic_run_keeps_the_wrap_offsets_and_rows():
+    """In a periodic box with particles outside it, sorting the Atoms carries the list's wrap
+    offsets (held in the Atoms' order) and its inverse permutation with them: after the first
+    sort the run is the unsorted run's bit for bit until the next build, and close to it after
+    (the sums add in another order)."""
+    def sample(sort_interval):
+        atoms = fcc_packing("Al", R0, size=(6, 4, 4), pbc=True)
+        rng = np.random.default_rng(3)
+        atoms.positions += [0.0, 0.37 * atoms.cell[1, 1], -0.21 * atoms.cell[2, 2]]   # not wrapped
+        atoms.set_velocities(rng.normal(0, 1.5 * units.km_s, (len(atoms), 3)))
+        atoms = atoms[rng.permutation(len(atoms))]
+        atoms.calc = ClusterDynamics()
+        atoms.calc.setup(atoms)
+        return atoms, DampedVerlet(atoms, timestep=default_timestep(atoms.calc, 4 * units.km_s), J=None,
+                                   sort_interval=sort_interval)
+    a, da = sample(None)
+    b, db = sample(4)
+    exact = 0
+    sorted_at = None
+    for step in range(24):
+        da.run(1)
+        db.run(1)
+        nl = b.calc.nl
+        assert np.array_equal(nl.row_n[nl.perm_n], np.arange(len(b)))
+        box = np.diag(b.cell)
+        ref = nl.ref_nc
+        assert np.abs(nl.offset_nc - (np.mod(ref, box) - ref)).max() < 1e-9 * box.max()
+        assert np.count_nonzero(nl.offset_nc) > len(b) // 4
+        if (step + 1) % 4 == 0:
+            if sorted_at is None:
+                sorted_at = nl.nbuilds            # the first sort: exact until the next build
+            assert np.array_equal(nl.perm_n, np.arange(len(b)))
+        if sorted_at is not None and nl.nbuilds == sorted_at:
+            assert np.array_equal(_by_id(a), _by_id(b)) and np.array_equal(_by_id(a, "momenta"), _by_id(b, "momenta"))
+            exact += 1
+        assert np.abs(_by_id(a) - _by_id(b)).max() < 1e-12 * np.abs(a.positions).max()
+    assert db.nsorts == 6 and exact >= 3 and b.calc.nl.nbuilds > 2
+
+
 def test_sorted_run_restarts_bit_for_bit(tmp_path):
     b, db = _sample(sort_interval=7)
     db.run(30)
