@@ -318,7 +318,7 @@ class ClusterDynamics(Calculator):
         lay = self._layout(n, per_particle, damping is not None)
         perm = nl.perm_n
         xs = lay["xs"]
-        if not fresh:
+        if not fresh and not (rebuilt and nl.perm_n is not None):   # a sorted build leaves them in xs
             nl.sorted_positions(pos, out=xs)
         types_s = types[perm] if multi else self._NO_TYPES
         vs, eta = self._NO_V, self._NO_ETA

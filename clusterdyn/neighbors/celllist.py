@@ -230,14 +230,16 @@ def _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n):
 @njit(cache=True, parallel=True)
 def _gather_sorted(pos_nc, box_c, periodic_c, perm, xs_nc, offs_nc, row_n):
     """Sorted wrapped positions of the rows of ``perm``, and each particle's wrap offset and row
-    (caller's order: ``offs_nc[i]``, ``row_n[i]``), in parallel."""
+    (caller's order: ``offs_nc[i]``, ``row_n[i]``), in parallel.  The rows are ``pos + offset``,
+    the sum :func:`gather_positions` makes, so that they are the step's sorted positions bit
+    for bit (the calculator does not gather them again after a build)."""
     for k in prange(perm.shape[0]):
         i = perm[k]
         row_n[i] = k
         for d in range(3):
-            w = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d])
-            xs_nc[k, d] = w
-            offs_nc[i, d] = w - pos_nc[i, d]
+            o = _wrap1(pos_nc[i, d], box_c[d], periodic_c[d]) - pos_nc[i, d]
+            offs_nc[i, d] = o
+            xs_nc[k, d] = pos_nc[i, d] + o
 
 
 @njit(cache=True)
