@@ -342,8 +342,9 @@ def _sort_rows(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, perm, x
     sort over the dense grid, or with ``sparse`` a radix sort of the cell keys (memory O(N)
     whatever the number of cells of the bounding box; the same order).  Fills ``perm`` (sorted
     row k is particle perm[k]), the sorted wrapped positions ``xs_nc``, and the particles' wrap
-    offsets ``offs_nc`` and rows ``row_n`` (both in the caller's order); returns the occupied cells ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds
-    rows ustart[q]..ustart[q+1]) and the dense row starts (ncell + 1; empty with ``sparse``).
+    offsets ``offs_nc`` and rows ``row_n`` (both in the caller's order); returns the occupied
+    cells ``(ukey, ustart)`` (ascending keys; cell ukey[q] holds rows ustart[q]..ustart[q+1])
+    and the dense row starts (ncell + 1; empty with ``sparse``).
     The keys (into the scratch ``key_n``) and the gather run in parallel, the sort in one thread."""
     _cell_keys(pos_nc, box_c, periodic_c, lo_c, inv_cs_c, ncell_c, axes, key_n)
     if sparse:
