@@ -318,7 +318,7 @@ class ClusterDynamics(Calculator):
         lay = self._layout(n, per_particle, damping is not None)
         perm = nl.perm_n
         xs = lay["xs"]
-        if not fresh and not (rebuilt and nl.perm_n is not None):   # a sorted build leaves them in xs
+        if not fresh and not rebuilt:       # a build (always sorted here) leaves them in xs
             nl.sorted_positions(pos, out=xs)
         types_s = types[perm] if multi else self._NO_TYPES
         vs, eta = self._NO_V, self._NO_ETA
@@ -402,7 +402,7 @@ class ClusterDynamics(Calculator):
         pos = atoms.arrays["positions"]
         n = len(atoms)
         lay = self._buffers
-        if (nl is None or nl.perm_n is None or nl.row_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
+        if (nl is None or nl.perm_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
                 or lay is None or lay["n"] != n or self._setup_key is None or pos.dtype != np.float64
                 or not pos.flags.c_contiguous or not momenta.flags.c_contiguous
                 or not forces.flags.c_contiguous or momenta.dtype != np.float64

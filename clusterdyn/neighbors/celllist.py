@@ -1441,11 +1441,11 @@ class NeighborList:
         xs, offs, perm, first, row = self._store
         self.xs_nc, self.offs_nc, self.perm_n, self.first_n = xs[:n], offs[:n], perm[:n], first[:n + 1]
         self.row_n = row[:n]
-        return self.perm_n, self.xs_nc, self.offs_nc
+        return self.perm_n, self.xs_nc, self.offs_nc, self.row_n
 
     def _build_sorted(self, pos, lo, ext, ncell, periodic_c, box, rcut):
         n = pos.shape[0]
-        perm, xs, offs = self._sorted_buffers(n)
+        perm, xs, offs, row = self._sorted_buffers(n)
         boxw = np.where(periodic_c, box, 1.0)
         fast = self.half and all(ncell[d] >= 3 for d in range(3) if periodic_c[d])
         if fast:
@@ -1463,7 +1463,7 @@ class NeighborList:
         dense_cells = float(np.prod(ncell.astype(float)))
         sparse = (self.cells == "sparse"
                   or (self.cells == "auto" and dense_cells > DENSE_CELLS_PER_PARTICLE * max(n, 1) + 27))
-        ukey, ustart, dstart = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self.row_n,
+        ukey, ustart, dstart = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, row,
                                           self._keys(n), sparse)
         if n >= 2 ** HALF_SHIFT:
             raise InputError("positions", f"{n} particles", f"fewer than 2**{HALF_SHIFT} in a sorted half list")
@@ -1511,12 +1511,12 @@ class NeighborList:
     def _build_sorted_search(self, pos, lo, ext, ncell, periodic_c, box, rcut, axes):
         """Sorted list by the full-stencil search (thin periodic boxes, full lists)."""
         n = pos.shape[0]
-        perm, xs, offs = self._sorted_buffers(n)
+        perm, xs, offs, row = self._sorted_buffers(n)
         boxw = np.where(periodic_c, box, 1.0)
         ncell = self._coarsen(ncell, MAX_CELLS_PER_PARTICLE * max(n, 1) + 27)
         cs, krange = self._sizes(ext, ncell, periodic_c, rcut)
         axes = np.array(sorted(range(3), key=lambda d: (-ncell[d], d)), np.int64)
-        ukey, ustart, _ = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, self.row_n,
+        ukey, ustart, _ = _sort_rows(pos, boxw, periodic_c, lo, 1.0 / cs, ncell, axes, perm, xs, offs, row,
                                      self._keys(n), False)
         self.layer_rows = int(_layer_rows(ukey, ustart, ncell[axes[1]] * ncell[axes[2]]))
         first_n = self.first_n

