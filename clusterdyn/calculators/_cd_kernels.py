@@ -306,7 +306,7 @@ def _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, tab, bounds_k, span
             e_m1[r, 0] = 0.0
             for c in range(6):
                 w_m6[r, c] = 0.0
-    nb = coef.shape[2] - 1        # the last bin is zero: pairs beyond the cut-off land there
+    nbu = np.uint64(coef.shape[2] - 1)   # the last bin is zero: pairs beyond the cut-off land there
     a = 0
     b = 0
     smin = meta[0, 0, 0]
@@ -391,9 +391,12 @@ def _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, tab, bounds_k, span
                 if free and r2 >= meta[a, b, 6]:
                     continue
             x = (r2 - smin) * invh
-            kb = min(max(int(x), 0), nb)
+            kb = int(x)
             t = x - kb
-            kbu = np.uint64(kb)
+            # one unsigned clamp: a bin past the last (a pair in the skin) or below the first (a
+            # pair closer than the table, x < 0, which every variant reports and the calculator
+            # raises on) reads the zero bin
+            kbu = min(np.uint64(kb), nbu)
             s_ = gtab[a, b, kbu, 0] + t * (gtab[a, b, kbu, 1] + t * gtab[a, b, kbu, 2])
             e = 0.0
             if ENERGY:  # (every per-particle variant has it)

@@ -395,6 +395,9 @@ class DampedVerlet(MolecularDynamics):
         """
         atoms = self.atoms
         drives = self._drives()
+        # the step these positions belong to: a step's force pass (the one with the second half
+        # kick) evaluates the positions of the step under way, which errors name
+        at = self.nsteps if kick is None else self.nsteps + 1
         t0 = time.perf_counter()
         if isinstance(self.calc, ClusterDynamics):
             damping = None
@@ -404,14 +407,14 @@ class DampedVerlet(MolecularDynamics):
             # half kick is done); it grows, never shrinks: removing particles takes a view of it
             n = len(atoms)
             self._fbuf = grown(self._fbuf, n)
-            out = self.calc.compute(atoms, damping=damping, step=self.nsteps, out=self._fbuf[:n],
+            out = self.calc.compute(atoms, damping=damping, step=at, out=self._fbuf[:n],
                                     virial=False, energy=False,
                                     kick=None if kick is None else (atoms.arrays["momenta"], kick))
             forces = out["forces"]
             self.potential_energy = out["energy"]
             self._dissipation = out.get("dissipation", 0.0)
             if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
-                self._check_stiffness()
+                self._check_stiffness(at)
         else:
             forces = np.ascontiguousarray(atoms.get_forces(apply_constraint=False), dtype=float)
             self.potential_energy = atoms.get_potential_energy()
@@ -456,8 +459,8 @@ class DampedVerlet(MolecularDynamics):
             self._safe[key] = r
         return r
 
-    def _check_stiffness(self):
-        """The time step against the limit set by the closest pair's own bond stiffness."""
+    def _check_stiffness(self, at):
+        """The time step against the limit set by the closest pair's own bond stiffness (at step ``at``)."""
         st = self.calc.last_stats
         x = st["min_r_over_r0"]
         if x >= 1.0 or not math.isfinite(x):
@@ -475,7 +478,7 @@ class DampedVerlet(MolecularDynamics):
         if self.dt > lim:
             raise InstabilityError(
                 "time step above the stability limit at the current compression "
-                f"(closest pair at r = {x:.3f} r0); lower the time step", step=self.nsteps,
+                f"(closest pair at r = {x:.3f} r0); lower the time step", step=at,
                 particles=st["closest"], quantity="timestep", value=self.dt, limit=lim)
 
     def _refresh_properties(self):

@@ -117,6 +117,23 @@ def test_pair_closer_than_the_table_names_step_particles_quantity():
     assert e.value.value == pytest.approx(r)
 
 
+
+@pytest.mark.parametrize("J", [None, 50])
+def test_pair_driven_deep_below_the_table_in_a_step_stops_naming_it(J):
+    # the step kernels (undamped and damped) clamp the bin of a pair below the table to the zero
+    # bin; the pair must still stop the run, at the step that brought it there
+    a = make_cluster_atoms(np.array([[0, 0, 0], [0.5 * R0, 0, 0], [5 * R0, 5 * R0, 5 * R0]]), ["Al"], [R0],
+                           cell=[10 * R0] * 3)
+    a.calc = ClusterDynamics()
+    dyn = DampedVerlet(a, J=J)
+    v = 0.5 * (0.5 - 0.06) * R0 / dyn.dt          # each moves 0.22 r0: under the 0.25 r0 step limit
+    a.set_velocities([[v, 0, 0], [-v, 0, 0], [0, 0, 0]])
+    with pytest.raises(InstabilityError) as e:
+        dyn.run(3)
+    err = e.value
+    assert err.step == 1 and set(err.particles) == {0, 1} and err.quantity == "distance r/r0"
+    assert err.value < 0.5 * R_MIN_FACTOR        # far below the table: bins below the first
+
 # ---------------------------------------------------------------- time step at 0.9x and 1.5x the limit
 def test_time_step_at_0p9_of_the_limit_is_bounded():
     a = noisy_lattice(rms=10 * units.m_s)
