@@ -117,7 +117,6 @@ def test_pair_closer_than_the_table_names_step_particles_quantity():
     assert e.value.value == pytest.approx(r)
 
 
-
 @pytest.mark.parametrize("J", [None, 50])
 def test_pair_driven_deep_below_the_table_in_a_step_stops_naming_it(J):
     # the step kernels (undamped and damped) clamp the bin of a pair below the table to the zero
@@ -133,6 +132,7 @@ def test_pair_driven_deep_below_the_table_in_a_step_stops_naming_it(J):
     err = e.value
     assert err.step == 1 and set(err.particles) == {0, 1} and err.quantity == "distance r/r0"
     assert err.value < 0.5 * R_MIN_FACTOR        # far below the table: bins below the first
+
 
 # ---------------------------------------------------------------- time step at 0.9x and 1.5x the limit
 def test_time_step_at_0p9_of_the_limit_is_bounded():
