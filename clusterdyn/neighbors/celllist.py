@@ -702,7 +702,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, row_n, offs_nc, ref_nc, x
 
     The pass runs in the caller's order, so that the particles' arrays (momenta, forces,
     positions, masses, reference positions, offsets) stream and only the sorted rows are
-    written at scattered places: 5% off the 128k slab's step against the same pass in row
+    written at scattered places: about 6% off the 128k slab's step against the same pass in row
     order (docs/performance.md, stop 25).
     """
     n = row_n.shape[0]
@@ -1158,8 +1158,8 @@ class NeighborList:
     row_n : (N,) int64 or None
         With ``sort``: the inverse, particle i is sorted row ``row_n[i]``.
     offs_nc : (N, 3) float64
-        With ``sort``: wrap offsets of the particles (caller's order; the buffer
-        behind :attr:`offset_nc`).
+        Wrap offsets of the particles at the last build (caller's order; the array
+        behind :attr:`offset_nc`; with ``sort`` a buffer kept across builds).
     xs_nc : (N, 3) float64
         With ``sort``: a buffer of sorted positions (wrapped positions at the
         build; the Cluster Dynamics calculator gathers each step's into it).
@@ -1421,7 +1421,7 @@ class NeighborList:
         self.perm_n = None
         self.row_n = None
         self.layer_rows = 0
-        self._offset_nc = wpos - pos
+        self.offs_nc = wpos - pos
         self.last_cells = "coarse"
 
     def _keys(self, n):
@@ -1505,7 +1505,6 @@ class NeighborList:
         self.img_shift = HALF_SHIFT
         self._j_p = self._img_p = None
         self.image_sc = self._image_table(np.ones(3, np.int64), box)
-        self._offset_nc = None
         self.last_cells = "sparse" if sparse else "dense"
 
     def _build_sorted_search(self, pos, lo, ext, ncell, periodic_c, box, rcut, axes):
@@ -1537,7 +1536,6 @@ class NeighborList:
         self.jp_p = self._pool[:npairs]
         self.img_shift = shift
         self._j_p, self._img_p = j_p, img_p
-        self._offset_nc = None
         self.last_cells = "coarse"
 
     @property
@@ -1561,9 +1559,8 @@ class NeighborList:
 
     @property
     def offset_nc(self):
-        """Wrap offsets at the last build, in the caller's particle order."""
-        if self.perm_n is None:
-            return self._offset_nc
+        """Wrap offsets at the last build, in the caller's particle order (a copy: a sorted
+        list's buffer is rewritten by the next build)."""
         return self.offs_nc.copy()
 
     def renumber(self, scratch):
@@ -1594,8 +1591,8 @@ class NeighborList:
 
     def memory_bytes(self):
         """Bytes of the arrays the list keeps between builds (list, permutation, buffers)."""
-        arrs = [self._ref_store, self._pool, self._j_p, self._img_p, self._disp, getattr(self, "_offset_nc", None)]
-        arrs += list(self._store) if self._store is not None else [self.first_n]
+        arrs = [self._ref_store, self._pool, self._j_p, self._img_p, self._disp]
+        arrs += list(self._store) if self._store is not None else [self.first_n, self.offs_nc]
         arrs.append(self._key_store)
         if self._bricks is not None:          # the brick store's arrays, and those made per build
             arrs += list(self._brick_store)
@@ -1606,7 +1603,7 @@ class NeighborList:
         """Wrapped positions in the list's row order (sorted lists), Angstrom."""
         pos = np.ascontiguousarray(positions, dtype=np.float64)
         if self.perm_n is None:
-            return pos + self._offset_nc
+            return pos + self.offs_nc
         if out is None:
             out = np.empty_like(pos)
         gather_positions(pos, self.perm_n, self.offs_nc, out)
