@@ -587,3 +587,54 @@ KERNELS = {
     (True, "damped"): cd_forces_damped_multi,
     (True, "per_particle"): cd_forces_per_particle_multi,
 }
+
+
+@njit(cache=True)
+def pair_energy_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, coef, meta, mask_n, perm_n,
+                         bonds_nk, id_n, init):
+    """The pair energy of the listed pairs with at least one particle in ``mask_n`` (caller's
+    order), as the energy passes count it (pairs within the cut-off and the table; with
+    ``init``, the ``attraction="initial"`` rule): what the potential energy loses when those
+    particles are taken out.  ``types_n``: material ids in the caller's order, or empty (one
+    material).  One thread, rows and pairs in list order: the same bits on any thread count."""
+    n = first_n.shape[0] - 1
+    nbu = np.uint64(coef.shape[2] - 1)
+    zero_img = np.uint32(image_sc.shape[0] // 2)
+    sh = np.uint32(shift)
+    jmask = np.uint32((1 << shift) - 1)
+    multi = types_n.shape[0] > 0
+    energy = 0.0
+    for i in range(n):
+        gi = mask_n[perm_n[i]]
+        a = types_n[perm_n[i]] if multi else 0
+        for p in range(first_n[i], first_n[i + 1]):
+            v = jp_p[p]
+            j = np.int64(v & jmask)
+            if not (gi or mask_n[perm_n[j]]):
+                continue
+            dx = xs_nc[j, 0] - xs_nc[i, 0]
+            dy = xs_nc[j, 1] - xs_nc[i, 1]
+            dz = xs_nc[j, 2] - xs_nc[i, 2]
+            s = v >> sh
+            if s != zero_img:
+                dx += image_sc[s, 0]
+                dy += image_sc[s, 1]
+                dz += image_sc[s, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            b = types_n[perm_n[j]] if multi else 0
+            if not r2 < meta[a, b, 2] or r2 < meta[a, b, 3]:
+                continue
+            free = False
+            if init:
+                free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[j]])
+                if free and r2 >= meta[a, b, 6]:
+                    continue
+            x = (r2 - meta[a, b, 0]) * meta[a, b, 1]
+            kb = int(x)
+            t = x - kb
+            kbu = min(np.uint64(kb), nbu)
+            e = coef[a, b, kbu, 0] + t * (coef[a, b, kbu, 1] + t * (coef[a, b, kbu, 2] + t * coef[a, b, kbu, 3]))
+            if free:
+                e += meta[a, b, 5]
+            energy += e
+    return energy

@@ -250,7 +250,7 @@ class ClusterDynamics(Calculator):
             lay = {"n": n, "key": None, "vs": None, "f_m3": old["f_m3"], "e_m1": old["e_m1"], "w_m6": old["w_m6"],
                    "vs_store": old["vs_store"]}
             self._buffers = lay
-        if lay["key"] != nl.nbuilds:
+        if lay["key"] != nl.version:
             nk = K.chunk_count(n, nl.layer_rows)
             lay["xs"] = nl.xs_nc          # the list's buffer of sorted positions (rewritten by each build)
             (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], lay["shared_n"],
@@ -262,7 +262,7 @@ class ClusterDynamics(Calculator):
                 lay["f_m3"] = None          # let the old buffer go first: never both held
                 lay["f_m3"] = np.empty((m + m // 8, 3))
                 lay["e_m1"], lay["w_m6"] = self._NO_PP1, self._NO_PP6
-            lay["key"] = nl.nbuilds
+            lay["key"] = nl.version
         m = lay["f_m3"].shape[0]
         if per_particle and lay["e_m1"].shape[0] != m:
             lay["e_m1"] = np.empty((m, 1))
@@ -308,13 +308,13 @@ class ClusterDynamics(Calculator):
         pos = atoms.arrays["positions"]
         nl = self.nl
         adv, self._advanced = self._advanced, None
-        if adv is not None and (adv[0] != id(pos) or adv[1] != nl.nbuilds or adv[5] != self._setup_key):
+        if adv is not None and (adv[0] != id(pos) or adv[1] != nl.version or adv[5] != self._setup_key):
             adv = None
         rebuilt = nl.update(pos, atoms.cell.array, atoms.pbc, displacement=None if adv is None else adv[2:4])
         fresh = adv is not None and not rebuilt  # the gathers of _advance are current
         initial, bonds, ids = self._bond_args(atoms)
         multi = len(self.potentials) > 1 or initial
-        types = self._types(atoms, nl.nbuilds)
+        types = self._types(atoms, nl.version)
         lay = self._layout(n, per_particle, damping is not None)
         perm = nl.perm_n
         xs = lay["xs"]
@@ -417,7 +417,7 @@ class ClusterDynamics(Calculator):
         v2max, k, m2, h2 = kick_drift_gather(momenta, forces, pos, invm, h, dt, nl.row_n, nl.offs_nc,
                                              nl.ref_nc, lay["xs"], lay["vs"] if damped else self._NO_V,
                                              self._bstat)
-        self._advanced = (id(pos), nl.nbuilds, m2, h2, damped, self._setup_key)
+        self._advanced = (id(pos), nl.version, m2, h2, damped, self._setup_key)
         return v2max, k
 
     def renumbered(self, order):
@@ -430,6 +430,39 @@ class ClusterDynamics(Calculator):
         st = self.last_stats
         if st is not None and dict.__contains__(st, "closest") and st["closest"][0] >= 0:
             st["closest"] = tuple(int(np.flatnonzero(order == i)[0]) for i in st["closest"])
+
+    def removed(self, keep_n):
+        """The Atoms' particles where ``keep_n`` (bool, the old rows) is False were taken out, the
+        others keeping their order (:meth:`clusterdyn.md.DampedVerlet.remove_outside`): the list
+        is compacted with them (:meth:`clusterdyn.neighbors.NeighborList.remove`: no rebuild), or,
+        when it can not be, rebuilt at the next compute; what was cached by array identity or
+        row is dropped.  Returns True when the list was kept."""
+        nl = self.nl
+        kept = nl is not None and nl.remove(keep_n)
+        self.reset()
+        self._types_key = self._types_cache = None
+        self._advanced = None
+        self._ncompute += 1
+        self.last_stats = None
+        return kept
+
+    def pair_energy_touching(self, atoms, mask_n):
+        """The pair energy (eV) of the pairs with at least one particle where ``mask_n`` is True:
+        what the potential energy loses when those particles are taken out (the energy passes'
+        pairs and rules; :func:`clusterdyn.calculators._cd_kernels.pair_energy_touching`, one
+        pass over the list, at the current positions)."""
+        mask = np.ascontiguousarray(mask_n, dtype=np.bool_)
+        if mask.shape != (len(atoms),):
+            raise InputError("mask_n", f"shape {mask.shape}", f"one bool per particle ({len(atoms)},)")
+        self.setup(atoms)
+        nl = self.nl
+        pos = atoms.arrays["positions"]
+        nl.update(pos, atoms.cell.array, atoms.pbc)
+        xs = nl.sorted_positions(pos, out=nl.xs_nc)
+        initial, bonds, ids = self._bond_args(atoms)
+        types = self._check_types(atoms) if len(self.potentials) > 1 else self._NO_TYPES
+        return float(K.pair_energy_touching(xs, types, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, self.coef,
+                                            self.meta, mask, nl.perm_n, bonds, ids, initial))
 
     def _types(self, atoms, key):
         """Material ids (checked); for one material checked once per list build or new array."""

@@ -110,3 +110,18 @@ def take_forces_along(f_nc, idx, n_c, out_c):
     out_c[0] = s * n_c[0]
     out_c[1] = s * n_c[1]
     out_c[2] = s * n_c[2]
+
+
+@njit(cache=True)
+def outside_box(x_nc, lo_c, hi_c, out_n):
+    """``out_n[i]`` = particle i is outside the box [lo, hi] (or has a non-finite coordinate);
+    returns how many are."""
+    c = 0
+    for i in range(x_nc.shape[0]):
+        o = False
+        for d in range(3):
+            if not (x_nc[i, d] >= lo_c[d] and x_nc[i, d] <= hi_c[d]):
+                o = True
+        out_n[i] = o
+        c += o
+    return c

@@ -115,8 +115,13 @@ class RegionOfInterest:
 
     def inside(self, positions):
         """(N,) bool: particles within the box."""
-        x = np.asarray(positions, dtype=float)
-        return np.all((x >= self.lo) & (x <= self.hi), axis=1)
+        return ~self.outside(positions)[0]
+
+    def outside(self, positions):
+        """((N,) bool, count): particles outside the box (one pass)."""
+        x = np.ascontiguousarray(positions, dtype=np.float64)
+        out = np.empty(x.shape[0], np.bool_)
+        return out, int(I.outside_box(x.reshape(-1, 3), self.lo, self.hi, out))
 
     def todict(self):
         return {"kind": "RegionOfInterest", "lo": self.lo.tolist(), "hi": self.hi.tolist()}
@@ -599,11 +604,20 @@ class DampedVerlet(MolecularDynamics):
         minus after: their bonds to the rest and among themselves) are added to
         :attr:`removed`; the forces are recomputed on the particles left.
         Particles of pistons and tractions are never removed.
+
+        With the Cluster Dynamics calculator the pair energy is that of the listed pairs
+        with a removed particle (one pass over the list,
+        :meth:`~clusterdyn.calculators.ClusterDynamics.pair_energy_touching`), plus the
+        constraints' energy before minus after, and the neighbour list is compacted, not
+        rebuilt (:meth:`~clusterdyn.calculators.ClusterDynamics.removed`); with another
+        calculator, the potential energy before minus after.
         """
         atoms = self.atoms
         if self.region is None:
             return 0
-        out = ~self.region.inside(atoms.arrays["positions"])
+        out, nout = self.region.outside(atoms.arrays["positions"])
+        if nout == 0:
+            return 0
         for d in self._drives():
             if isinstance(d, _Layer):
                 out[d.index] = False
@@ -620,7 +634,11 @@ class DampedVerlet(MolecularDynamics):
         m = atoms.get_masses()
         k_gone = 0.5 * float(((p[gone] ** 2).sum(axis=1) / m[gone]).sum())
         p_gone = p[gone].sum(axis=0)
-        u_before = self.potential_energy
+        cd = isinstance(self.calc, ClusterDynamics)
+        if cd:
+            u_before = self.calc.pair_energy_touching(atoms, out) + self._constraint_energy()
+        else:
+            u_before = self.potential_energy
         cons = list(atoms.constraints)
         atoms.set_constraint()
         for c in cons:
@@ -628,13 +646,16 @@ class DampedVerlet(MolecularDynamics):
         for name in list(atoms.arrays):
             atoms.arrays[name] = _compact(atoms.arrays[name], keep)
         atoms.set_constraint(cons)
-        if atoms.calc is not None and hasattr(atoms.calc, "reset"):
+        if cd:
+            self.calc.removed(~out)
+        elif atoms.calc is not None and hasattr(atoms.calc, "reset"):
             atoms.calc.reset()
         self._invm_n = self._invm()
         self._epot = None
         self.forces = self._compute_forces()
         self._own_forces = True
-        u_after = self.potential_energy
+        # (Cluster Dynamics: the pairs left are not summed, so their energy is not needed)
+        u_after = self._constraint_energy() if cd else self.potential_energy
         r = self.removed
         r["count"] += int(gone.size)
         r["mass"] += float(m[gone].sum())
@@ -756,6 +777,11 @@ class DampedVerlet(MolecularDynamics):
         if self._ledger0 is not None:
             st["ledger0"] = dict(self._ledger0)
         if nl is not None and nl.ref_nc is not None:
+            if getattr(nl, "compacted", False):
+                # a list compacted by removals keeps the old build's row order, not the order a
+                # build from its reference positions (the restart's) gives: build it so here too,
+                # and the two runs add their pair sums in the same order
+                nl.build(nl.ref_nc, self.atoms.cell.array, self.atoms.pbc)
             st["nl_ref"] = nl.ref_nc.copy() if copy else nl.ref_nc
         if self.forces is not None:
             st["forces"] = self.forces.copy() if copy else self.forces

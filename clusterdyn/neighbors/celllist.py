@@ -1068,6 +1068,76 @@ def _bricks_safe(mid_b3, rad_b2, blo_b3, bhi_b3, skey_b, sid_b, nb_c, csz_c, box
 
 
 @njit(cache=True)
+def _compact_rows(keep_n, perm_n, row_n, first_n, pool_p, jmask, xs_nc, offs_nc, ref_nc, brick_n, rmap_r):
+    """Drop the particles where ``keep_n`` is False from a sorted list, in place (see
+    :meth:`NeighborList.remove`): the kept rows keep their order, the pairs of a dropped row
+    or partner go, the kept partners are renumbered; the caller-order arrays (``offs_nc``,
+    ``ref_nc``, ``brick_n`` when it has rows) keep the kept particles' order.  ``rmap_r``:
+    scratch of n int64 (new row of each old row, -1 dropped).  Every write goes to an index at
+    or before the one read, so one forward pass needs no copy.  Returns (rows, pairs) kept."""
+    n = keep_n.shape[0]
+    c = 0
+    for r in range(n):
+        if keep_n[perm_n[r]]:
+            rmap_r[r] = c
+            c += 1
+        else:
+            rmap_r[r] = -1
+    m = c
+    notmask = ~jmask
+    w = 0
+    lo = first_n[0]
+    for r in range(n):
+        hi = first_n[r + 1]
+        k = rmap_r[r]
+        if k >= 0:
+            first_n[k] = w
+            for p in range(lo, hi):
+                v = pool_p[p]
+                kj = rmap_r[v & jmask]
+                if kj >= 0:
+                    pool_p[w] = (v & notmask) | np.uint32(kj)
+                    w += 1
+            for d in range(3):
+                xs_nc[k, d] = xs_nc[r, d]
+        lo = hi
+    first_n[m] = w
+    bricks = brick_n.shape[0] == n
+    c = 0
+    for i in range(n):
+        if keep_n[i]:
+            row_n[c] = rmap_r[row_n[i]]
+            for d in range(3):
+                offs_nc[c, d] = offs_nc[i, d]
+                ref_nc[c, d] = ref_nc[i, d]
+            if bricks:
+                brick_n[c] = brick_n[i]
+            c += 1
+    for c in range(m):
+        perm_n[row_n[c]] = c
+    return m, w
+
+
+@njit(cache=True)
+def _renumber_bricks(brick_n, nb):
+    """Occupied bricks of ``brick_n`` renumbered in their order, in place; returns the new
+    number of each old brick (-1: emptied)."""
+    newb = np.zeros(nb, np.int64)
+    for i in range(brick_n.shape[0]):
+        newb[brick_n[i]] = 1
+    c = 0
+    for b in range(nb):
+        if newb[b]:
+            newb[b] = c
+            c += 1
+        else:
+            newb[b] = -1
+    for i in range(brick_n.shape[0]):
+        brick_n[i] = newb[brick_n[i]]
+    return newb
+
+
+@njit(cache=True)
 def _identity(perm_n):
     for k in range(perm_n.shape[0]):
         perm_n[k] = k
@@ -1169,6 +1239,10 @@ class NeighborList:
         Cartesian lattice translations indexed by the image codes.
     nbuilds : int
         Number of builds so far.
+    version : int
+        Builds and compactions (:meth:`remove`) so far: the list's arrays change with it.
+    nremovals : int
+        Compactions so far.
     layer_rows : int
         With ``sort``: the most rows in one layer of cells across the slowest
         cell axis at the last build (rows beyond it, a layer on, are the
@@ -1192,6 +1266,9 @@ class NeighborList:
         self.centered = bool(centered)
         self.cells = cells
         self.nbuilds = 0
+        self.version = 0                # builds and compactions (remove)
+        self.nremovals = 0
+        self.compacted = False          # removals since the last build (see remove)
         self.ref_nc = None
         self._ref_store = None          # buffers behind ref_nc and the sorted rows' arrays (grow only)
         self._store = None
@@ -1322,6 +1399,8 @@ class NeighborList:
         np.copyto(self.ref_nc, pos)
         self._key = _box_key(cell, pbc)
         self.nbuilds += 1
+        self.version += 1
+        self.compacted = False
 
     def _set_bricks(self, pos, geo):
         """The local rebuild test's bricks: cubes of at least :data:`BRICK_SIDE` (cutoff + skin)
@@ -1577,6 +1656,61 @@ class NeighborList:
             permute(self._bricks[0], self.perm_n, scratch)
         _identity(self.perm_n)
         _identity(self.row_n)
+
+    def remove(self, keep_n):
+        """The caller drops the particles where ``keep_n`` is False (the others keeping their
+        order, as ``atoms[keep_n]`` does).  A sorted list built over the current particles stays
+        valid without a rebuild: the dropped rows and every pair with a dropped partner go, the
+        kept rows keep their order and their pairs (:func:`_compact_rows`, one pass, in place:
+        nothing of N's size is allocated); the reference positions, wrap offsets and the local
+        test's bricks follow (emptied bricks are dropped, the others' build boxes are taken
+        again over the particles kept).  Returns False, changing nothing, for a list that can
+        not be compacted (unsorted, or not built over these particles): the caller rebuilds.
+        :attr:`version` counts builds and compactions (what users of the list's arrays key on).
+
+        The compacted list holds the pairs a build from the kept reference positions would
+        hold, but its rows are in the old build's order (a build sorts them over the kept
+        particles' own bounding box), so pair sums add in another order: :attr:`compacted`
+        says so until the next build (a checkpoint rebuilds from the reference positions
+        first, as its restart does)."""
+        keep = np.asarray(keep_n)
+        if (self.perm_n is None or self.ref_nc is None or keep.dtype != np.bool_ or keep.ndim != 1
+                or self.ref_nc.shape[0] != keep.shape[0] or self.perm_n.shape[0] != keep.shape[0]):
+            return False
+        n = keep.shape[0]
+        br = self._bricks
+        brick_n = br[0] if br is not None else np.zeros(0, np.int32)
+        m, npairs = _compact_rows(keep, self.perm_n, self.row_n, self.first_n, self._pool, self.j_mask,
+                                  self.xs_nc, self.offs_nc, self.ref_nc, brick_n, self._keys(n))
+        self._sorted_buffers(m)
+        self.ref_nc = self._ref_store[:m]
+        self.jp_p = self._pool[:npairs]
+        self._j_p = self._img_p = None
+        self.layer_rows = max(1, self.layer_rows * m // max(n, 1)) if self.layer_rows else 0
+        if br is not None:
+            self._drop_bricks(m)
+        self.version += 1
+        self.nremovals += 1
+        self.compacted = True
+        return True
+
+    def _drop_bricks(self, m):
+        """The local test's bricks over the ``m`` particles kept by :meth:`remove`."""
+        brick_n, blo, bhi, box, periodic_c, *_, skey, sid, nb_c, csz = self._bricks
+        brick_n = self._brick_store[0][:m]
+        newb = _renumber_bricks(brick_n, blo.shape[0])
+        mb = int(newb.max()) + 1 if newb.size else 0
+        if mb < 2:
+            self._bricks = None
+            return
+        nt = _brick_chunks()
+        blo, bhi = self._brick_store[1][:mb], self._brick_store[2][:mb]
+        _brick_boxes(self.ref_nc, np.where(periodic_c, box, 1.0), periodic_c, brick_n, np.empty((nt, mb, 6)),
+                     blo, bhi)
+        u = newb[sid] >= 0
+        self._bricks = (brick_n, blo, bhi, box, periodic_c, np.empty((nt, mb, 6)), np.empty((mb, 3)),
+                        np.empty((mb, 3)), np.empty((nt, mb, 2)), np.empty((mb, 2)), skey[u].copy(),
+                        newb[sid[u]].astype(np.int64), nb_c, csz)
 
     def scratch(self, n):
         """A scratch of ``n`` rows of :data:`~clusterdyn.buffers.PERMUTE_WORDS` float64 words for
