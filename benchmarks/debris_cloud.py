@@ -206,14 +206,21 @@ def worker_run(a):
             csv.writer(fh).writerow(FIELDS)
     r0 = atoms.calc.potentials[0].r0
     nl = atoms.calc.nl
+    from _states import state_path
+    n0 = len(atoms)
+    nx = max(1, round(n0 / 1024))
+    slab_state = state_path(nx, a.slab_fraction)
+    if not slab_state.exists():
+        # the slab reference's state is made on first use in a process of its own: its build and
+        # steps (a million clusters) are not this run's memory
+        code = f"import sys; sys.path.insert(0, {str(HERE)!r}); from _states import shock_state; " \
+               f"shock_state({nx}, {a.slab_fraction!r})"
+        subprocess.run([sys.executable, "-c", code], check=True)
     # the peak from here on: building the sample (lattices, overlap checks) is not the run
     gc.collect()
     trim()
     base = max(base, 0)
     reset_peak()
-    from _states import shock_state
-    n0 = len(atoms)
-    slab_state = shock_state(max(1, round(n0 / 1024)), a.slab_fraction)
     print(f"[{a.run}] N = {n0}, dt = {dyn.dt / units.fs:.4g} fs, initial box {np.round(ext0 / r0, 1)} r0",
           flush=True)
     trace = MemoryTrace(out.parent / f"debris_cloud_{a.run}_memory.csv", dyn, nl, base, n0, a.resume)
