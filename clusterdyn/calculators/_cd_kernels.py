@@ -590,27 +590,36 @@ KERNELS = {
 
 
 @njit(cache=True)
-def pair_energy_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, coef, meta, mask_n, perm_n,
-                         bonds_nk, id_n, init):
-    """The pair energy of the listed pairs with at least one particle in ``mask_n`` (caller's
-    order), as the energy passes count it (pairs within the cut-off and the table; with
-    ``init``, the ``attraction="initial"`` rule): what the potential energy loses when those
-    particles are taken out.  ``types_n``: material ids in the caller's order, or empty (one
-    material).  One thread, rows and pairs in list order: the same bits on any thread count."""
+def pairs_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, gtab, coef, meta, mask_n, perm_n,
+                   bonds_nk, id_n, init, vs_nc, eta_tt, f_nc):
+    """What the listed pairs with at least one particle in ``mask_n`` (caller's order) contribute:
+    returns (energy, dissipation), and subtracts their forces from ``f_nc`` (caller's order;
+    skipped when it is empty).  The energy as the energy passes count it (pairs within the cut-off
+    and the table; with ``init``, the ``attraction="initial"`` rule): what the potential energy
+    loses when those particles are taken out.  The forces and the dissipation as the step kernels
+    make them, with the pair damping when ``vs_nc`` (sorted rows' velocities, those of the force
+    pass that made ``f_nc``) is not empty: ``f_nc`` minus them is that pass's forces without the
+    pairs.  ``types_n``: material ids in the caller's order, or empty (one material).  One thread,
+    rows and pairs in list order: the same bits on any thread count."""
     n = first_n.shape[0] - 1
     nbu = np.uint64(coef.shape[2] - 1)
     zero_img = np.uint32(image_sc.shape[0] // 2)
     sh = np.uint32(shift)
     jmask = np.uint32((1 << shift) - 1)
     multi = types_n.shape[0] > 0
+    damp = vs_nc.shape[0] > 0
+    forces = f_nc.shape[0] > 0
     energy = 0.0
+    dissip = 0.0
     for i in range(n):
-        gi = mask_n[perm_n[i]]
-        a = types_n[perm_n[i]] if multi else 0
+        pi = perm_n[i]
+        gi = mask_n[pi]
+        a = types_n[pi] if multi else 0
         for p in range(first_n[i], first_n[i + 1]):
             v = jp_p[p]
             j = np.int64(v & jmask)
-            if not (gi or mask_n[perm_n[j]]):
+            pj = perm_n[j]
+            if not (gi or mask_n[pj]):
                 continue
             dx = xs_nc[j, 0] - xs_nc[i, 0]
             dy = xs_nc[j, 1] - xs_nc[i, 1]
@@ -621,20 +630,39 @@ def pair_energy_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, coef, m
                 dy += image_sc[s, 1]
                 dz += image_sc[s, 2]
             r2 = dx * dx + dy * dy + dz * dz
-            b = types_n[perm_n[j]] if multi else 0
-            if not r2 < meta[a, b, 2] or r2 < meta[a, b, 3]:
-                continue
+            b = types_n[pj] if multi else 0
             free = False
             if init:
-                free = not _bonded(bonds_nk, perm_n[i], id_n[perm_n[j]])
+                free = not _bonded(bonds_nk, pi, id_n[pj])
                 if free and r2 >= meta[a, b, 6]:
                     continue
             x = (r2 - meta[a, b, 0]) * meta[a, b, 1]
             kb = int(x)
             t = x - kb
             kbu = min(np.uint64(kb), nbu)
-            e = coef[a, b, kbu, 0] + t * (coef[a, b, kbu, 1] + t * (coef[a, b, kbu, 2] + t * coef[a, b, kbu, 3]))
-            if free:
-                e += meta[a, b, 5]
-            energy += e
-    return energy
+            if r2 < meta[a, b, 2] and not r2 < meta[a, b, 3]:
+                e = coef[a, b, kbu, 0] + t * (coef[a, b, kbu, 1] + t * (coef[a, b, kbu, 2] + t * coef[a, b, kbu, 3]))
+                if free:
+                    e += meta[a, b, 5]
+                energy += e
+            s_ = gtab[a, b, kbu, 0] + t * (gtab[a, b, kbu, 1] + t * gtab[a, b, kbu, 2])
+            fx = s_ * dx
+            fy = s_ * dy
+            fz = s_ * dz
+            if damp:
+                ein = eta_tt[a, b] * gtab[a, b, kbu, 3]
+                dvx = vs_nc[i, 0] - vs_nc[j, 0]
+                dvy = vs_nc[i, 1] - vs_nc[j, 1]
+                dvz = vs_nc[i, 2] - vs_nc[j, 2]
+                fx += ein * dvx
+                fy += ein * dvy
+                fz += ein * dvz
+                dissip += ein * (dvx * dvx + dvy * dvy + dvz * dvz)
+            if forces:
+                f_nc[pi, 0] += fx
+                f_nc[pi, 1] += fy
+                f_nc[pi, 2] += fz
+                f_nc[pj, 0] -= fx
+                f_nc[pj, 1] -= fy
+                f_nc[pj, 2] -= fz
+    return energy, dissip

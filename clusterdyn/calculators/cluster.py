@@ -149,6 +149,8 @@ class ClusterDynamics(Calculator):
         self._buffers = None
         self._ncompute = 0
         self._advanced = None
+        self._vs_token = None
+        self._eta_tt = None
         self._bstat = None
         self._types_key = None
         self._types_cache = None
@@ -223,6 +225,8 @@ class ClusterDynamics(Calculator):
         self._buffers = None
         self._ncompute = 0
         self._advanced = None
+        self._vs_token = None
+        self._eta_tt = None
         self._bstat = None
         self._types_key = None
 
@@ -384,6 +388,9 @@ class ClusterDynamics(Calculator):
             res["virials"] = w
         if mode == "damped" and energy:
             res["energy"] = self.compute(atoms, step=step, virial=False, forces=False)["energy"]
+        if mode == "damped":
+            # this pass's velocities stay in lay["vs"] until the next pass (pairs_touching)
+            self._vs_token, self._eta_tt = (self._ncompute, nl.version), eta
         return res
 
     _NO_ETA = np.zeros((0, 0))
@@ -446,23 +453,40 @@ class ClusterDynamics(Calculator):
         self.last_stats = None
         return kept
 
-    def pair_energy_touching(self, atoms, mask_n):
-        """The pair energy (eV) of the pairs with at least one particle where ``mask_n`` is True:
-        what the potential energy loses when those particles are taken out (the energy passes'
-        pairs and rules; :func:`clusterdyn.calculators._cd_kernels.pair_energy_touching`, one
-        pass over the list, at the current positions)."""
+    def pairs_touching(self, atoms, mask_n, forces=None, damped=False):
+        """What the listed pairs with at least one particle where ``mask_n`` is True contribute at
+        the current positions: returns (energy, dissipation), eV and eV per ASE time unit, or
+        None (nothing done) when ``damped`` is asked and the last damped force pass is not
+        the last pass (its velocities are gone).  The energy is what the potential energy loses
+        when those particles are taken out (the energy passes' pairs and rules).  With
+        ``forces`` ((N, 3), caller's order: the last force pass's own, constraints apart), their
+        pair forces are subtracted from it, with the pair damping at that pass's velocities when
+        ``damped``: the forces that pass gives without those pairs
+        (:func:`clusterdyn.calculators._cd_kernels.pairs_touching`, one pass over the list)."""
         mask = np.ascontiguousarray(mask_n, dtype=np.bool_)
         if mask.shape != (len(atoms),):
             raise InputError("mask_n", f"shape {mask.shape}", f"one bool per particle ({len(atoms)},)")
+        f = self._NO_V if forces is None else forces
+        if forces is not None and (f.shape != (len(atoms), 3) or f.dtype != np.float64 or not f.flags.c_contiguous):
+            raise InputError("forces", f"{f.dtype} array of shape {f.shape}", f"C-contiguous float64 ({len(atoms)}, 3)")
         self.setup(atoms)
         nl = self.nl
+        lay = self._buffers
+        vs = self._NO_V
+        if damped:
+            if self._vs_token != (self._ncompute, nl.version) or lay is None or lay["vs"] is None:
+                return None
+            vs = lay["vs"]
         pos = atoms.arrays["positions"]
-        nl.update(pos, atoms.cell.array, atoms.pbc)
+        if nl.update(pos, atoms.cell.array, atoms.pbc) and damped:
+            return None
         xs = nl.sorted_positions(pos, out=nl.xs_nc)
         initial, bonds, ids = self._bond_args(atoms)
         types = self._check_types(atoms) if len(self.potentials) > 1 else self._NO_TYPES
-        return float(K.pair_energy_touching(xs, types, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, self.coef,
-                                            self.meta, mask, nl.perm_n, bonds, ids, initial))
+        e, d = K.pairs_touching(xs, types, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, self.gtab, self.coef,
+                                self.meta, mask, nl.perm_n, bonds, ids, initial, vs,
+                                self._eta_tt if damped else self._NO_ETA, f)
+        return float(e), float(d)
 
     def _types(self, atoms, key):
         """Material ids (checked); for one material checked once per list build or new array."""

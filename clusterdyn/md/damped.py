@@ -607,10 +607,14 @@ class DampedVerlet(MolecularDynamics):
 
         With the Cluster Dynamics calculator the pair energy is that of the listed pairs
         with a removed particle (one pass over the list,
-        :meth:`~clusterdyn.calculators.ClusterDynamics.pair_energy_touching`), plus the
+        :meth:`~clusterdyn.calculators.ClusterDynamics.pairs_touching`), plus the
         constraints' energy before minus after, and the neighbour list is compacted, not
-        rebuilt (:meth:`~clusterdyn.calculators.ClusterDynamics.removed`); with another
-        calculator, the potential energy before minus after.
+        rebuilt (:meth:`~clusterdyn.calculators.ClusterDynamics.removed`).  Without
+        constraints, the same pass takes those pairs' forces (and damping, at the step's
+        velocities) out of the step's forces, which then are the forces of the particles left,
+        with no force pass over them; with constraints (which may adjust the forces), the
+        forces are computed afresh.  With another calculator, the potential energy before minus
+        after, and the forces afresh.
         """
         atoms = self.atoms
         if self.region is None:
@@ -635,8 +639,15 @@ class DampedVerlet(MolecularDynamics):
         k_gone = 0.5 * float(((p[gone] ** 2).sum(axis=1) / m[gone]).sum())
         p_gone = p[gone].sum(axis=0)
         cd = isinstance(self.calc, ClusterDynamics)
+        lost = None
+        if cd and not atoms.constraints and self._own_forces:
+            # the step's forces less the pairs of the removed particles: no pass over the rest
+            lost = self.calc.pairs_touching(atoms, out, forces=self.forces, damped=self._eta is not None)
+        incremental = lost is not None
+        if cd and lost is None:
+            lost = self.calc.pairs_touching(atoms, out)
         if cd:
-            u_before = self.calc.pair_energy_touching(atoms, out) + self._constraint_energy()
+            u_before = lost[0] + self._constraint_energy()
         else:
             u_before = self.potential_energy
         cons = list(atoms.constraints)
@@ -652,7 +663,11 @@ class DampedVerlet(MolecularDynamics):
             atoms.calc.reset()
         self._invm_n = self._invm()
         self._epot = None
-        self.forces = self._compute_forces()
+        if incremental:
+            self.forces = _compact(self.forces, keep)
+            self._dissipation -= lost[1]
+        else:
+            self.forces = self._compute_forces()
         self._own_forces = True
         # (Cluster Dynamics: the pairs left are not summed, so their energy is not needed)
         u_after = self._constraint_energy() if cd else self.potential_energy

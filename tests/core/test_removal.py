@@ -200,7 +200,7 @@ def test_compacted_list_gives_a_fresh_builds_forces_and_the_energy_lost(case):
     nl = calc.nl
     nb, ver = nl.nbuilds, nl.version
     gone = rng.random(len(atoms)) < 0.3
-    lost = calc.pair_energy_touching(atoms, gone)
+    lost = calc.pairs_touching(atoms, gone)[0]
     kept = atoms[~gone]
     assert calc.removed(~gone)
     kept.calc = calc
@@ -252,3 +252,41 @@ def test_removal_keeps_the_list_and_the_local_test():
     # (the removal run's global test fails later: the displacements left span half as much)
     assert nl0.nbuilds == nl1.nbuilds == 1 and nl0.nlocal > 0 and nl1.nlocal > 0
     assert nl1._bricks[1].shape[0] == np.unique(nl1._bricks[0]).size < nl0._bricks[1].shape[0]
+
+
+@pytest.mark.parametrize("J", [None, 50.0])
+def test_removal_takes_the_removed_pairs_out_of_the_steps_forces(J):
+    """Without constraints a removal runs no force pass: the step's forces less the removed
+    particles' pairs (and their damping, at the step's velocities) are the forces the step's
+    pass gives over the particles left, to 1e-12."""
+    atoms = fcc_packing("Al", R0, size=(6, 5, 5), pbc=False)
+    rng = np.random.default_rng(11)
+    atoms.set_velocities(rng.normal(0, 50 * units.m_s, (len(atoms), 3)))
+    atoms.calc = ClusterDynamics()
+    atoms.calc.setup(atoms)
+    dt = default_timestep(atoms.calc, 1 * units.km_s)
+    hi = [atoms.positions[:, 0].max() - 1.5 * R0, np.inf, np.inf]       # the last two layers go
+    twin = atoms.copy()
+    twin.calc = ClusterDynamics()
+    dyn = DampedVerlet(atoms, timestep=dt, J=J, region=RegionOfInterest(hi=hi), remove_interval=5)
+    ref = DampedVerlet(twin, timestep=dt, J=J)
+    dyn.run(4)
+    ref.run(5)
+    passes = []
+    own = dyn._compute_forces
+    dyn._compute_forces = lambda *a, **k: passes.append(1) or own(*a, **k)
+    nb = atoms.calc.nl.nbuilds
+    dyn.run(1)
+    keep = twin.positions[:, 0] <= hi[0]
+    assert len(passes) == 1 and atoms.calc.nl.nbuilds == nb and 0 < len(atoms) == keep.sum() < len(twin)
+    assert np.array_equal(atoms.positions, twin.positions[keep])
+    # the step's pass over the particles left: its positions, and velocities half a step back
+    kept = twin[keep]
+    kept.calc = ClusterDynamics()
+    damping = None
+    if J is not None:
+        p_half = twin.arrays["momenta"] - 0.5 * dt * ref.forces
+        damping = (np.ascontiguousarray(p_half[keep]), 1.0 / kept.get_masses(), ref._eta)
+    want = kept.calc.compute(kept, damping=damping)["forces"]
+    assert np.abs(dyn.forces - want).max() <= 1e-12 * np.abs(want).max()
+    assert np.abs(ref.forces[keep] - want).max() > 1e-6 * np.abs(want).max()    # the pairs mattered
