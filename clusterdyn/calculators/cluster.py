@@ -408,9 +408,9 @@ class ClusterDynamics(Calculator):
         nl = self.nl
         pos = atoms.arrays["positions"]
         n = len(atoms)
-        lay = self._buffers
+        # (a list compacted by a removal is ready: the layout follows the new count below)
         if (nl is None or nl.perm_n is None or nl.ref_nc is None or nl.ref_nc.shape != pos.shape
-                or lay is None or lay["n"] != n or self._setup_key is None or pos.dtype != np.float64
+                or self._buffers is None or self._setup_key is None or pos.dtype != np.float64
                 or not pos.flags.c_contiguous or not momenta.flags.c_contiguous
                 or not forces.flags.c_contiguous or momenta.dtype != np.float64
                 or forces.dtype != np.float64):
