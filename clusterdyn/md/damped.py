@@ -569,13 +569,15 @@ class DampedVerlet(MolecularDynamics):
         the next build are the same bit for bit (in ``id`` order) as without
         the sort.  The next build's cell sort is stable in the new order, so
         from there the pair sums may add in another order (rounding).  False
-        when the list has not been built over the current particles yet.
+        when the list has not been built over the current particles yet, and
+        when the Atoms are in its row order already (no build since the last
+        sort: nothing to move).
         """
         atoms = self.atoms
         nl = getattr(self.calc, "nl", None)
         n = len(atoms)
         if (not isinstance(self.calc, ClusterDynamics) or nl is None or nl.perm_n is None or nl.ref_nc is None
-                or nl.ref_nc.shape[0] != n):
+                or nl.ref_nc.shape[0] != n or nl.in_order):
             return False
         self._renumbering(atoms, "sort_atoms()", add_id=False)
         if self.forces is None:

@@ -1138,6 +1138,14 @@ def _renumber_bricks(brick_n, nb):
 
 
 @njit(cache=True)
+def _is_identity(perm_n):
+    for k in range(perm_n.shape[0]):
+        if perm_n[k] != k:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _identity(perm_n):
     for k in range(perm_n.shape[0]):
         perm_n[k] = k
@@ -1243,6 +1251,9 @@ class NeighborList:
         Builds and compactions (:meth:`remove`) so far: the list's arrays change with it.
     nremovals : int
         Compactions so far.
+    in_order : bool
+        The rows are in the caller's order (the permutation is the identity): after a
+        :meth:`renumber`, and after a build that found them so.
     layer_rows : int
         With ``sort``: the most rows in one layer of cells across the slowest
         cell axis at the last build (rows beyond it, a layer on, are the
@@ -1269,6 +1280,7 @@ class NeighborList:
         self.version = 0                # builds and compactions (remove)
         self.nremovals = 0
         self.compacted = False          # removals since the last build (see remove)
+        self.in_order = False           # the permutation is the identity (see renumber)
         self.ref_nc = None
         self._ref_store = None          # buffers behind ref_nc and the sorted rows' arrays (grow only)
         self._store = None
@@ -1401,6 +1413,7 @@ class NeighborList:
         self.nbuilds += 1
         self.version += 1
         self.compacted = False
+        self.in_order = self.perm_n is not None and bool(_is_identity(self.perm_n))
 
     def _set_bricks(self, pos, geo):
         """The local rebuild test's bricks: cubes of at least :data:`BRICK_SIDE` (cutoff + skin)
@@ -1656,6 +1669,7 @@ class NeighborList:
             permute(self._bricks[0], self.perm_n, scratch)
         _identity(self.perm_n)
         _identity(self.row_n)
+        self.in_order = True
 
     def remove(self, keep_n):
         """The caller drops the particles where ``keep_n`` is False (the others keeping their
@@ -1666,7 +1680,8 @@ class NeighborList:
         test's bricks follow (emptied bricks are dropped, the others' build boxes are taken
         again over the particles kept).  Returns False, changing nothing, for a list that can
         not be compacted (unsorted, or not built over these particles): the caller rebuilds.
-        :attr:`version` counts builds and compactions (what users of the list's arrays key on).
+        :attr:`version` counts builds and compactions (what users of the list's arrays key on);
+        rows in the caller's order (:attr:`in_order`) stay so.
 
         The compacted list holds the pairs a build from the kept reference positions would
         hold, but its rows are in the old build's order (a build sorts them over the kept

@@ -51,12 +51,15 @@ def test_sorted_atoms_run_the_same_trajectory(tmp_path):
     db.attach(w, interval=10)
     exact = 0
     builds_at_sort = None
+    sorts, built = 0, -1
     for step in range(40):
         da.run(1)
         db.run(1)
         if (step + 1) % 5 == 0:                           # sorted at the end of this step
             if builds_at_sort is None:
                 builds_at_sort = b.calc.nl.nbuilds        # the first sort: exact until the next build
+            # (a sort only when a build since the last one left something to move)
+            sorts, built = (sorts + 1, b.calc.nl.nbuilds) if b.calc.nl.nbuilds != built else (sorts, built)
             assert np.array_equal(b.calc.nl.perm_n, np.arange(len(b)))     # the list's rows are the Atoms'
         if builds_at_sort is not None and b.calc.nl.nbuilds == builds_at_sort:
             assert np.array_equal(_by_id(a), _by_id(b)) and np.array_equal(_by_id(a, "momenta"), _by_id(b, "momenta"))
@@ -67,7 +70,7 @@ def test_sorted_atoms_run_the_same_trajectory(tmp_path):
         assert np.abs(_by_id(a) - _by_id(b)).max() < 1e-12 * scale
         assert np.allclose(pist_b.force, pist_a.force, rtol=1e-9, atol=1e-9 * np.abs(pist_a.force).max())
     w.close()
-    assert db.nsorts == 8 and exact >= 4 and b.calc.nl.nbuilds > 2
+    assert db.nsorts == sorts and 2 < sorts < 8 and exact >= 4 and b.calc.nl.nbuilds > 2
     assert not np.array_equal(a.arrays["id"], b.arrays["id"])                 # the sort did reorder
     assert set(b.arrays["id"][pist_b.index].tolist()) == ids_piston
     import h5py
@@ -97,6 +100,7 @@ def test_sorted_periodic_run_keeps_the_wrap_offsets_and_rows():
     b, db = sample(4)
     exact = 0
     sorted_at = None
+    sorts, built = 0, -1
     for step in range(24):
         da.run(1)
         db.run(1)
@@ -109,23 +113,27 @@ def test_sorted_periodic_run_keeps_the_wrap_offsets_and_rows():
         if (step + 1) % 4 == 0:
             if sorted_at is None:
                 sorted_at = nl.nbuilds            # the first sort: exact until the next build
+            sorts, built = (sorts + 1, nl.nbuilds) if nl.nbuilds != built else (sorts, built)
             assert np.array_equal(nl.perm_n, np.arange(len(b)))
         if sorted_at is not None and nl.nbuilds == sorted_at:
             assert np.array_equal(_by_id(a), _by_id(b)) and np.array_equal(_by_id(a, "momenta"), _by_id(b, "momenta"))
             exact += 1
         assert np.abs(_by_id(a) - _by_id(b)).max() < 1e-12 * np.abs(a.positions).max()
-    assert db.nsorts == 6 and exact >= 3 and b.calc.nl.nbuilds > 2
+    assert db.nsorts == sorts and 1 < sorts <= 6 and exact >= 3 and b.calc.nl.nbuilds > 2
 
 
 def test_sorted_run_restarts_bit_for_bit(tmp_path):
     b, db = _sample(sort_interval=7)
     db.run(30)
     save_run(tmp_path / "c.h5", db)
+    n30 = db.nsorts
     db.run(30)
     b2, d2, _ = load_run(tmp_path / "c.h5")
     assert d2.sort_interval == 7
     d2.run(30)
-    assert db.nsorts == 8 and d2.nsorts == 4
+    # the restart's list, built from the sorted Atoms' reference positions, is in their order
+    # too: the two runs sort at the same steps
+    assert n30 >= 2 and db.nsorts - n30 == d2.nsorts >= 1
     for name in ("positions", "momenta", "id"):
         assert np.array_equal(b2.arrays[name], b.arrays[name])
 
