@@ -10,6 +10,8 @@ the library's undamped variant costs what a loop written without the damping ter
 import numpy as np
 from numba import njit, prange
 
+from clusterdyn.calculators._cd_kernels import table_force
+
 
 @njit(cache=True, parallel=True)
 def reference_forces(xs_nc, first_n, jp_p, shift, image_sc, gtab, meta, bounds_k, span_k2, boff_k, f_mc,
@@ -53,7 +55,7 @@ def reference_forces(xs_nc, first_n, jp_p, shift, image_sc, gtab, meta, bounds_k
                 kb = min(max(int(x), 0), nb)
                 t = x - kb
                 kbu = np.uint64(kb)
-                s_ = gtab[0, 0, kbu, 0] + t * (gtab[0, 0, kbu, 1] + t * gtab[0, 0, kbu, 2])
+                s_ = table_force(gtab, 0, 0, kbu, t)
                 fx = s_ * dx
                 fy = s_ * dy
                 fz = s_ * dz

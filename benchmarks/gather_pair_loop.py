@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from clusterdyn.calculators._cd_kernels import _put3
+from clusterdyn.calculators._cd_kernels import _put3, table_force
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -80,7 +80,7 @@ def _two_pass_chunk(k, xs_nc, first_n, pi_p, jp_p, shift, image_sc, gtab, meta, 
             kbmin = min(kbmin, kb)
             t = x - kb
             kbu = np.uint64(kb)
-            s_ = gtab[0, 0, kbu, 0] + t * (gtab[0, 0, kbu, 1] + t * gtab[0, 0, kbu, 2])
+            s_ = table_force(gtab, 0, 0, kbu, t)
             q = p - pa + base
             fx_q[q] = s_ * dx
             fy_q[q] = s_ * dy
