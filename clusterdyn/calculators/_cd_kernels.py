@@ -57,9 +57,11 @@ damping dissipates ``sum eta |v_i - v_j|^2`` (``DAMP`` variants; 0 otherwise)), 
 pair virial (xx yy zz yz xz xy), eV.
 """
 
+from fractions import Fraction
+
 import numpy as np
 from llvmlite import ir
-from numba import njit, prange
+from numba import config, njit, prange
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
@@ -115,10 +117,7 @@ def kernel_tables(coef, meta):
 
 
 @intrinsic
-def fma(typingctx, x, y, z):
-    """``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``): IEEE 754's fused multiply-add, the
-    same bits on every CPU (one instruction where the CPU has FMA, libm's ``fma`` where not),
-    unlike letting the compiler contract ``x * y + z`` where it likes."""
+def _fma(typingctx, x, y, z):
     sig = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
@@ -126,6 +125,18 @@ def fma(typingctx, x, y, z):
         fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
         return builder.call(fn, args)
     return sig, codegen
+
+
+def _fma_python(x, y, z):
+    return float(Fraction(x) * Fraction(y) + Fraction(z))   # exact, then rounded once
+
+
+#: ``fma(x, y, z)``: ``x * y + z`` rounded once, IEEE 754's fused multiply-add.  Compiled, it is
+#: LLVM's ``llvm.fma.f64``: one instruction where the CPU has FMA, libm's ``fma`` where not, the
+#: same bits on every CPU (unlike letting the compiler contract ``x * y + z`` where it likes).
+#: Under ``NUMBA_DISABLE_JIT=1`` (debugging the kernels as Python) it is the same sum in exact
+#: rational arithmetic, rounded once: the same bits again.
+fma = _fma_python if config.DISABLE_JIT else _fma
 
 
 @njit(inline="always")

@@ -52,3 +52,49 @@ def test_step_forces_match_the_previous_kernel(J):
     big = norm > 1e-3 * norm.max()
     assert (np.linalg.norm(f - ref, axis=1)[big] / norm[big]).max() < 1e-12
     assert c.last_stats["min_r_over_r0"] < 0.95       # compressed pairs are in the comparison
+
+
+
+def test_fma_rounds_once_compiled_and_as_python():
+    """x y + z with x y = 1 - 2**-60 exactly: rounded once it is -2**-60; a multiplication
+    rounded before the addition gives 0.  Both the compiled fma and its Python fallback
+    (NUMBA_DISABLE_JIT) must round once."""
+    from numba import njit
+    from clusterdyn.calculators._cd_kernels import _fma, _fma_python
+
+    @njit
+    def compiled(x, y, z):
+        return _fma(x, y, z)
+    x, y, z = 1.0 + 2.0 ** -30, 1.0 - 2.0 ** -30, -1.0
+    assert x * y + z == 0.0
+    assert compiled(x, y, z) == -2.0 ** -60 and _fma_python(x, y, z) == -2.0 ** -60
+
+
+_RUN = """
+import numpy as np
+from clusterdyn import units
+from clusterdyn.build import fcc_packing
+from clusterdyn.calculators import ClusterDynamics
+from clusterdyn.md import DampedVerlet
+atoms = fcc_packing("Al", r0=5 * units.um, size=(3, 3, 3), pbc=True)
+atoms.positions += np.random.default_rng(1).normal(0, 0.1 * units.um, atoms.positions.shape)
+atoms.calc = ClusterDynamics(rc=1.15)
+dyn = DampedVerlet(atoms, J=50)
+dyn.run(2)
+np.save(path, np.concatenate([atoms.positions, dyn.forces]))
+"""
+
+
+def test_the_kernels_run_as_python_with_the_same_bits(tmp_path):
+    """Under NUMBA_DISABLE_JIT=1 (the kernels run as Python, for debugging) a damped run gives
+    the compiled run's positions and forces bit for bit (the intrinsic fma alone would raise
+    there: its fallback is exact rational arithmetic rounded once)."""
+    import os
+    import subprocess
+    import sys
+    exec(_RUN, {"path": str(tmp_path / "jit.npy")})
+    code = f"path = {str(tmp_path / 'python.npy')!r}\n" + _RUN
+    subprocess.run([sys.executable, "-c", code], env=dict(os.environ, NUMBA_DISABLE_JIT="1"), check=True,
+                   timeout=300)
+    jit, py = np.load(tmp_path / "jit.npy"), np.load(tmp_path / "python.npy")
+    assert np.abs(jit).max() > 0 and np.array_equal(jit, py)
