@@ -54,7 +54,6 @@ def test_step_forces_match_the_previous_kernel(J):
     assert c.last_stats["min_r_over_r0"] < 0.95       # compressed pairs are in the comparison
 
 
-
 def test_fma_rounds_once_compiled_and_as_python():
     """x y + z with x y = 1 - 2**-60 exactly: rounded once it is -2**-60; a multiplication
     rounded before the addition gives 0.  Both the compiled fma and its Python fallback
