@@ -1251,9 +1251,6 @@ class NeighborList:
         Builds and compactions (:meth:`remove`) so far: the list's arrays change with it.
     nremovals : int
         Compactions so far.
-    in_order : bool
-        The rows are in the caller's order (the permutation is the identity): after a
-        :meth:`renumber`, and after a build that found them so.
     layer_rows : int
         With ``sort``: the most rows in one layer of cells across the slowest
         cell axis at the last build (rows beyond it, a layer on, are the
@@ -1280,7 +1277,6 @@ class NeighborList:
         self.version = 0                # builds and compactions (remove)
         self.nremovals = 0
         self.compacted = False          # removals since the last build (see remove)
-        self.in_order = False           # the permutation is the identity (see renumber)
         self.ref_nc = None
         self._ref_store = None          # buffers behind ref_nc and the sorted rows' arrays (grow only)
         self._store = None
@@ -1413,7 +1409,6 @@ class NeighborList:
         self.nbuilds += 1
         self.version += 1
         self.compacted = False
-        self.in_order = self.perm_n is not None and bool(_is_identity(self.perm_n))
 
     def _set_bricks(self, pos, geo):
         """The local rebuild test's bricks: cubes of at least :data:`BRICK_SIDE` (cutoff + skin)
@@ -1669,7 +1664,13 @@ class NeighborList:
             permute(self._bricks[0], self.perm_n, scratch)
         _identity(self.perm_n)
         _identity(self.row_n)
-        self.in_order = True
+
+    @property
+    def in_order(self):
+        """True when the rows are in the caller's order (the permutation is the identity): after
+        :meth:`renumber`, after a build that found them so, and through compactions of either.
+        Read from the permutation (one pass, stopping at the first row out of place)."""
+        return self.perm_n is not None and bool(_is_identity(self.perm_n))
 
     def remove(self, keep_n):
         """The caller drops the particles where ``keep_n`` is False (the others keeping their
