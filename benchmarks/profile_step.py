@@ -17,7 +17,12 @@ process waited for a core).  ``--sort-every-build`` sorts the Atoms into
 the list's row order after every step that rebuilt the list
 (:meth:`clusterdyn.md.DampedVerlet.sort_atoms`, timed as "sorts"), so that
 the list's permutation is the identity between builds.  The first line gives
-the listed pairs per particle (the pair loop's work) beside the builds.  The
+the listed pairs per particle (the pair loop's work) beside the builds.
+``--detail`` adds rows for the parts of the builds and of "other" (indented:
+they are inside the rows above them): the cell sort (keys, sort, gather of
+the sorted rows), the pair fill, the slabs' compaction, the local test's
+bricks, the chunk layout of a new list (in "other") and the rebuild test (in
+"other": the local test over bricks when the global one fails).  The
 script profiles whatever ``clusterdyn`` is imported, so
 ``PYTHONPATH=/path/to/other/tree`` profiles another version.
 """
@@ -43,6 +48,8 @@ def main(argv=None):
                     help="start from the saved state with this fraction shocked (instead of --warmup steps)")
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--clock", choices=("wall", "process"), default="wall")
+    ap.add_argument("--detail", action="store_true",
+                    help="also time the builds' parts, the chunk layout and the rebuild test")
     ap.add_argument("--sort-every-build", action="store_true",
                     help="sort the Atoms into the list's row order after every step that rebuilt the list")
     a = ap.parse_args(argv)
@@ -72,6 +79,20 @@ def main(argv=None):
     C.kick_drift_gather = timed(parts[2], C.kick_drift_gather)
     K.reduce_rows = timed(parts[3], K.reduce_rows)
     K.reduce_shared = timed(parts[3], K.reduce_shared)
+    sub = ()
+    if a.detail:
+        # (row, where it is timed): module-level functions looked up when called, so wrapping
+        # the module attribute times every call
+        sub = (("  build: cell sort", CL, ("_cell_keys", "_count_sort", "_radix_sort", "_gather_sorted")),
+               ("  build: pair fill", CL, ("_fill_slabs",)),
+               ("  build: slab compaction", CL, ("_close_slabs",)),
+               ("  build: bricks", CL.NeighborList, ("_set_bricks",)),
+               ("  other: chunk layout", K, ("chunk_layout",)),
+               ("  other: rebuild test", CL.NeighborList, ("_moved",)))
+        for row, owner, names in sub:
+            for name in names:
+                setattr(owner, name, timed(row, getattr(owner, name)))
+        sub = tuple(row for row, _, _ in sub)
 
     J = None if a.J == "none" else float(a.J)
     if a.fraction is None:
@@ -112,7 +133,7 @@ def main(argv=None):
             builds[th] += atoms.calc.nl.nbuilds - nb0
             pairs.append(atoms.calc.nl.npairs / n)
             acc["other"] = acc["whole step"] - sum(acc.get(p, 0.0) for p in parts)
-            for k in parts + ("other", "whole step"):
+            for k in parts + ("other", "whole step") + sub:
                 per[th].setdefault(k, []).append(acc.get(k, 0.0) / (a.steps * n) * 1e9)
     import os
     print(f"clusterdyn {Path(clusterdyn.__file__).parent.parent}: N = {n}, J = {a.J}, {where}: {a.rounds} rounds "
@@ -124,7 +145,7 @@ def main(argv=None):
           + f"; load average {os.getloadavg()[0]:.1f}")
     head = "| part | " + " | ".join(f"{t} thread(s)" for t in threads) + (" | efficiency |" if len(threads) == 2 else " |")
     print(head + "\n|" + "---|" * (len(threads) + 1 + (len(threads) == 2)))
-    for k in parts + ("other", "whole step"):
+    for k in parts + ("other", "whole step") + sub:
         row = [f"{np.median(per[t][k]):.1f}" for t in threads]
         if len(threads) == 2:
             t1, t2 = np.array(per[threads[0]][k]), np.array(per[threads[1]][k])
