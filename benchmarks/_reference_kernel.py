@@ -16,7 +16,7 @@ from clusterdyn.calculators._cd_kernels import table_force
 @njit(cache=True, parallel=True)
 def reference_forces(xs_nc, first_n, jp_p, shift, image_sc, gtab, meta, bounds_k, span_k2, boff_k, f_mc,
                      stat_k, shared_n, perm_n, out_nc):
-    nb = gtab.shape[2] - 1
+    nbu = np.uint64(gtab.shape[2] - 1)
     smin = meta[0, 0, 0]
     invh = meta[0, 0, 1]
     zero_img = np.uint32(image_sc.shape[0] // 2)
@@ -52,9 +52,9 @@ def reference_forces(xs_nc, first_n, jp_p, shift, image_sc, gtab, meta, bounds_k
                 r2 = dx * dx + dy * dy + dz * dz
                 minr2 = min(minr2, r2)
                 x = (r2 - smin) * invh
-                kb = min(max(int(x), 0), nb)
+                kb = int(x)
                 t = x - kb
-                kbu = np.uint64(kb)
+                kbu = min(np.uint64(kb), nbu)     # the library's one unsigned clamp (zero bin beyond)
                 s_ = table_force(gtab, 0, 0, kbu, t)
                 fx = s_ * dx
                 fy = s_ * dy

@@ -59,13 +59,9 @@ FIELDS = ["run", "chunk", "step", "time_ns", "N", "removed", "wall_s", "cpu_s", 
 
 
 def _warm(J):
-    """Compile (or load from the cache) the kernels on a tiny sample, then return the process size."""
-    from clusterdyn import units
-    from clusterdyn.scenes.shock import build_shock
-    t = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=J)
-    t.dyn.run(2)
-    t.dyn.sort_atoms()                 # the sort's kernels too: code, not the sample's memory
-    del t
+    """Compile (or load from the cache) the kernels on a small shock, then return the process size."""
+    from _states import warm_kernels
+    warm_kernels(J, sort=True)         # the sort's kernels too: code, not the sample's memory
     gc.collect()
     return status("VmRSS")
 

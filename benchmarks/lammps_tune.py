@@ -79,16 +79,12 @@ DEFAULT_NEIGH = NEIGH[0]
 def worker_cd(a):
     """clusterdyn's timed window from the saved state: rate, builds, peak memory per particle."""
     import gc
-    from _states import load_state
-    from clusterdyn import units
+    from _states import load_state, warm_kernels
     from clusterdyn.parallel import set_max_threads
-    from clusterdyn.scenes.shock import build_shock
     set_max_threads(a.threads)
     J = None if a.J == "none" else float(a.J)
     import h5py  # noqa: F401  (the checkpoint reader's library: part of the base size, not of the sample)
-    tiny = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=J)     # kernels from the cache, then the base size
-    tiny.dyn.run(2)
-    del tiny
+    warm_kernels(J, sort=bool(a.sort_interval))      # every kernel of the window, then the base size
     gc.collect()
     base = status("VmRSS")
     atoms, dyn, extra = load_state(a.state, J=J)

@@ -57,15 +57,14 @@ def worker_cd(a):
     from clusterdyn import units
     from clusterdyn.parallel import set_max_threads
     from clusterdyn.scenes.shock import build_shock
+    from _states import warm_kernels
     t_import = time.perf_counter() - t_import
     set_max_threads(a.threads)
     J = None if a.J == "none" else float(a.J)
-    # compile (or load from cache) on a tiny scene first, so set-up and compile are apart
+    # compile (or load from cache) on a small scene first, so set-up and compile are apart
     t0 = time.perf_counter()
-    tiny = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=J)
-    tiny.dyn.run(2)
+    warm_kernels(J)
     t_compile = time.perf_counter() - t0
-    del tiny
     gc.collect()
     base = status("VmRSS")
     t0 = time.perf_counter()
