@@ -28,7 +28,7 @@ def shocked_fraction(atoms, piston_mask, u):
 
 def warm_kernels(J=None, sort=False):
     """Compile, or load from numba's on-disk cache, every kernel a timed window of the piston
-    shock calls, on a small shock of its own (1 152 clusters, 200 steps, about 0.2 s warm), so
+    shock calls, on a small shock of its own (1 152 clusters, 200 steps, 0.1-0.7 s measured), so
     that no load falls inside the window.  A shock of 288 clusters for 2 steps, the warm-up
     before stop 28, never ran the local rebuild test over bricks: its three kernels were loaded
     from the cache inside the first window of every process (17-24 ms, measured: 1.2-1.5% of
