@@ -110,10 +110,13 @@ def _force(dx, dy, dz, gtab, smin, invh, nbu):
 
 
 @njit(inline="always")
-def _add3(f_mc, r, fx, fy, fz):
+def _take(f_mc, r, fx, fy, fz, r2, minr2, fxi, fyi, fzi):
+    """A pair's force added to its partner's buffer row; returns the row's updated smallest r^2
+    and force sum (the kernel's order of operations)."""
     f_mc[r, 0] += fx
     f_mc[r, 1] += fy
     f_mc[r, 2] += fz
+    return min(minr2, r2), fxi - fx, fyi - fy, fzi - fz
 
 
 def make(mode, dist=0):
@@ -165,11 +168,7 @@ def make(mode, dist=0):
                         ju = np.uint64(jp_p[p] & jmask)
                         dx, dy, dz = _sep(xs_nc, ju, xi, yi, zi)
                         fx, fy, fz, r2 = _force(dx, dy, dz, gtab, smin, invh, nbu)
-                        minr2 = min(minr2, r2)
-                        fxi -= fx
-                        fyi -= fy
-                        fzi -= fz
-                        _add3(f_mc, offu + ju, fx, fy, fz)
+                        minr2, fxi, fyi, fzi = _take(f_mc, offu + ju, fx, fy, fz, r2, minr2, fxi, fyi, fzi)
                     for p in range(pm, p1):
                         v = jp_p[p]
                         ju = np.uint64(v & jmask)
@@ -177,11 +176,7 @@ def make(mode, dist=0):
                         dx, dy, dz = _sep(xs_nc, ju, xi, yi, zi)
                         fx, fy, fz, r2 = _force(dx + image_sc[su, 0], dy + image_sc[su, 1], dz + image_sc[su, 2],
                                                 gtab, smin, invh, nbu)
-                        minr2 = min(minr2, r2)
-                        fxi -= fx
-                        fyi -= fy
-                        fzi -= fz
-                        _add3(f_mc, offu + ju, fx, fy, fz)
+                        minr2, fxi, fyi, fzi = _take(f_mc, offu + ju, fx, fy, fz, r2, minr2, fxi, fyi, fzi)
                     p1 = p0
                 for p in range(p0, p1):
                     v = jp_p[p]
@@ -196,11 +191,7 @@ def make(mode, dist=0):
                         dy += image_sc[su, 1]
                         dz += image_sc[su, 2]
                     fx, fy, fz, r2 = _force(dx, dy, dz, gtab, smin, invh, nbu)
-                    minr2 = min(minr2, r2)
-                    fxi -= fx
-                    fyi -= fy
-                    fzi -= fz
-                    _add3(f_mc, offu + ju, fx, fy, fz)
+                    minr2, fxi, fyi, fzi = _take(f_mc, offu + ju, fx, fy, fz, r2, minr2, fxi, fyi, fzi)
                 f_mc[off + i, 0] += fxi
                 f_mc[off + i, 1] += fyi
                 f_mc[off + i, 2] += fzi
