@@ -31,6 +31,8 @@ fixed blocks too (they are a tenth of a step; serial they cap two threads at 80%
 
 from ._openmp import SPIN_COUNT  # noqa: F401  (the settings are made when clusterdyn is imported)
 
+import threading  # noqa: E402
+
 import numba  # noqa: E402
 from numba import njit  # noqa: E402
 
@@ -40,6 +42,10 @@ MIN_PARTICLES_PER_THREAD = 16384
 #: results do not depend on the thread count
 STREAM_BLOCK = 8192
 _MAX = [None]
+#: (generation, count) :func:`use_threads` last gave numba on this Python thread (numba's count
+#: is per thread); :func:`set_max_threads` and :func:`forget_threads` start a new generation
+_LAST = threading.local()
+_GEN = [0]
 
 
 def max_threads():
@@ -52,6 +58,7 @@ def set_max_threads(n):
         from .errors import InputError
         raise InputError("threads", n, f"1..{numba.config.NUMBA_NUM_THREADS}")
     _MAX[0] = None if n is None else int(n)
+    _GEN[0] += 1
 
 
 def threads_for(n):
@@ -60,10 +67,25 @@ def threads_for(n):
 
 
 def use_threads(n):
-    """Set numba's thread count for the coming kernels over n particles; returns it."""
+    """Set numba's thread count for the coming kernels over n particles; returns it.
+
+    numba is told only when the count differs from the one this function last gave it on the
+    calling thread (``numba.set_num_threads`` takes 1.4-1.9 us, and a step asks five times:
+    about a tenth of a step of 2 048 clusters).  A count set with ``numba.set_num_threads``
+    between clusterdyn's calls therefore stays until clusterdyn's own count changes; limit
+    clusterdyn's kernels with :func:`set_max_threads`, or call :func:`forget_threads` after
+    setting numba's count directly.  The kernels' results do not depend on the count."""
     k = threads_for(n)
-    numba.set_num_threads(k)
+    want = (_GEN[0], k)
+    if getattr(_LAST, "set", None) != want:
+        numba.set_num_threads(k)
+        _LAST.set = want
     return k
+
+
+def forget_threads():
+    """Make the next :func:`use_threads` on every thread set numba's count, whatever it last set."""
+    _GEN[0] += 1
 
 
 @njit(inline="always")

@@ -286,6 +286,30 @@ def reduce_shared(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, shar
             _put3(out_nc, p_nc, np.uint64(perm_n[i]), sx, sy, sz, kick, h)
 
 
+@njit(cache=True)
+def chunk_stats(stat_k6, perm_n):
+    """After a force pass: the closest pair's rows (columns 2, 3, where the loop tracked them)
+    renamed to the caller's rows through ``perm_n``, in place; returns (k, smallest of column
+    4, sum of column 4), k the chunk of the smallest r^2 (the first NaN if any, as
+    ``np.argmin``).  One call instead of a Python loop over the chunks and three numpy
+    reductions (about 10 us a step, a twentieth of a step of 2 048 clusters)."""
+    k = 0
+    best = stat_k6[0, 1]
+    low = stat_k6[0, 4]
+    tot = 0.0
+    for q in range(stat_k6.shape[0]):
+        for c in range(2, 4):
+            if stat_k6[q, c] >= 0:
+                stat_k6[q, c] = perm_n[np.int64(stat_k6[q, c])]
+        v = stat_k6[q, 1]
+        if best == best and (v != v or v < best):
+            k = q
+            best = v
+        low = min(low, stat_k6[q, 4])
+        tot += stat_k6[q, 4]
+    return k, low, tot
+
+
 @njit(cache=True, parallel=True)
 def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc, p_nc, h):
     """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic).

@@ -172,8 +172,8 @@ class ClusterDynamics(Calculator):
         return changes
 
     def _material_spec(self, atoms):
-        raw = (self.parameters.materials, self.parameters.r0, atoms.info.get("cd_materials"),
-               atoms.info.get("cd_r0"))
+        prm, info = self.parameters, atoms.info     # item access: Parameters' attributes are a Python call
+        raw = (prm["materials"], prm["r0"], info.get("cd_materials"), info.get("cd_r0"))
         probe = repr(raw)
         if self._spec_cache is not None and self._spec_cache[0] == probe:
             return self._spec_cache[1]
@@ -203,7 +203,8 @@ class ClusterDynamics(Calculator):
     def setup(self, atoms):
         """Build potentials, tables and the neighbour list (once per material set)."""
         mats, r0 = self._material_spec(atoms)
-        key = (mats, r0, float(self.parameters.rc), self.parameters.skin, self.parameters.n_table)
+        prm = self.parameters
+        key = (mats, r0, float(prm["rc"]), prm["skin"], prm["n_table"])
         if key == self._setup_key:
             return
         rc = check_rc(self.parameters.rc)
@@ -348,12 +349,8 @@ class ClusterDynamics(Calculator):
                 lay["bounds"], lay["span"], lay["boff"], lay["f_m3"], stat, vir, vs, eta, lay["e_m1"], lay["w_m6"],
                 perm, bonds, ids, initial, lay["shared_n"], f_nc, p_kick, h)
         K.KERNELS[multi, mode](*args)
-        for c in (2, 3):
-            for k in range(stat.shape[0]):
-                if stat[k, c] >= 0:
-                    stat[k, c] = perm[int(stat[k, c])]
+        k, low, nclose = K.chunk_stats(stat, perm)
         self._ncompute += 1
-        k = int(np.argmin(stat[:, 1]))
         # the step kernels take the smallest distance over every listed pair: beyond the cut-off
         # it means that no pair is within it
         x2 = stat[k, 1]
@@ -366,7 +363,7 @@ class ClusterDynamics(Calculator):
             stats._args = (K.KERNELS[multi, "virial"], args[:15] + (self._NO_V, self._NO_ETA) + args[17:],
                            stat, perm)
         self.last_stats = stats
-        self._check_close(stat, types, step)
+        self._check_close(stat, types, step, x2, low, nclose)
         red = (lay["bounds"], lay["span"], lay["boff"], lay["cptr"], lay["clist"], perm)
         if fin:
             use_threads(lay["shared_r"].shape[0])
@@ -504,7 +501,7 @@ class ClusterDynamics(Calculator):
     _NO_IDS = np.zeros(0, np.int64)
 
     def _bond_args(self, atoms):
-        if self.parameters.attraction != "initial":
+        if self.parameters["attraction"] != "initial":
             return False, self._NO_BONDS, self._NO_IDS
         bonds = atoms.arrays.get("bonds0")
         ids = atoms.arrays.get("id")
@@ -514,14 +511,17 @@ class ClusterDynamics(Calculator):
                              "clusterdyn.calculators.mark_initial_bonds(atoms) on the set-up configuration")
         return True, np.ascontiguousarray(bonds, np.int64), np.ascontiguousarray(ids, np.int64)
 
-    def _check_close(self, stat, types, step):
-        if stat[:, 4].min() < 0:
+    def _check_close(self, stat, types, step, x2, low, nclose):
+        """``x2``: the smallest r^2/r0^2 of the pass (NaN if any is); ``low``, ``nclose``: the
+        smallest and the sum of the chunks' counts of pairs below the table
+        (:func:`~clusterdyn.calculators._cd_kernels.chunk_stats`)."""
+        if low < 0:
             # a single-material step kernel does not count the pairs below the table: recount
             # (the tracking variant) only when the smallest distance is below it
-            if stat[:, 1].min() > self._rmin2n:
+            if x2 > self._rmin2n:
                 return
             self.last_stats["closest"]            # reruns the loop's tracking variant into stat
-        nclose = stat[:, 4].sum()
+            nclose = stat[:, 4].sum()
         if nclose > 0:
             k = int(np.argmin(stat[:, 1]))
             x2 = stat[k, 1]

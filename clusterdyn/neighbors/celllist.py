@@ -1152,9 +1152,14 @@ def _identity(perm_n):
 
 
 def _box_key(cell, pbc):
-    """What :meth:`NeighborList.update` compares to tell whether the box changed since the build."""
-    return (tuple(np.asarray(cell, dtype=float).ravel().tolist()),
-            tuple(np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).tolist()))
+    """What :meth:`NeighborList.update` compares to tell whether the box changed since the build:
+    the bytes of the cell's nine float64 values and of the three periodic flags (0.3 us; as
+    tuples of Python values it took 4 us, a fiftieth of a step of 2 048 clusters).  A change of
+    bits that leaves the values equal (-0.0 for 0.0) rebuilds the list once more than needed."""
+    pbc = np.asarray(pbc, dtype=bool)
+    if pbc.shape != (3,):
+        pbc = np.broadcast_to(pbc, (3,))
+    return np.ascontiguousarray(cell, dtype=np.float64).tobytes() + pbc.tobytes()
 
 
 def check_cell(cell, pbc):
@@ -1301,6 +1306,7 @@ class NeighborList:
         self._brick_side = 0.0
         self.nlocal = 0                 # rebuilds the local test saved
         self._disp = np.zeros((DISP_BLOCKS, 7))
+        self._images = None             # (key, table) of _image_table
 
     def update(self, positions, cell, pbc, displacement=None):
         """Rebuild if needed; return True when rebuilt.
@@ -1470,12 +1476,20 @@ class NeighborList:
         self._pool = np.empty(size + size // 8, np.uint32)
 
     def _image_table(self, krange, box):
+        """Shifts of the periodic images within ``krange`` cells (rows of :attr:`image_sc`); kept
+        while the box and the reach are the same (made with a meshgrid: about 40 us a build,
+        which a small scene pays every few steps)."""
+        key = (tuple(int(k) for k in krange), np.ascontiguousarray(box, dtype=np.float64).tobytes())
+        if self._images is not None and self._images[0] == key:
+            return self._images[1]
         kx, ky, kz = krange
         ii = np.arange(-kx, kx + 1)
         jj = np.arange(-ky, ky + 1)
         ll = np.arange(-kz, kz + 1)
         img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
-        return np.ascontiguousarray(img * box[None, :])
+        table = np.ascontiguousarray(img * box[None, :])
+        self._images = (key, table)
+        return table
 
     def _count_and_fill(self, xs, cell_n, start, order, ncell, krange, periodic_c, box, rcut, first_n):
         """The full-stencil search in two passes: count each row's pairs into ``first_n`` (zeroed,

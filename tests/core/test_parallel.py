@@ -33,3 +33,38 @@ def test_short_spin_then_sleep_by_default():
 ])
 def test_the_users_choice_is_kept(given, expected):
     assert _env_after_import(**given) == expected
+
+
+def test_use_threads_tells_numba_only_when_its_count_changes(monkeypatch):
+    """``use_threads`` calls ``numba.set_num_threads`` when its own count changes (per Python thread),
+    and again after ``set_max_threads`` or ``forget_threads``; numba's count is clusterdyn's after
+    each call."""
+    import threading
+
+    import numba
+
+    from clusterdyn import parallel as P
+    calls = []
+    real = numba.set_num_threads
+    monkeypatch.setattr(numba, "set_num_threads", lambda k: (calls.append(k), real(k)))
+    big = 2 * P.MIN_PARTICLES_PER_THREAD
+    try:
+        P.forget_threads()
+        P.use_threads(10)
+        P.use_threads(20)                     # the same count: numba not told again
+        assert calls == [1] and numba.get_num_threads() == 1
+        k2 = P.use_threads(big)
+        assert calls == [1, k2] and numba.get_num_threads() == k2 == min(2, numba.config.NUMBA_NUM_THREADS)
+        P.set_max_threads(1)                  # a new limit applies at once
+        assert P.use_threads(big) == 1 and calls[-1] == 1 and numba.get_num_threads() == 1
+        real(numba.config.NUMBA_NUM_THREADS)  # set behind clusterdyn's back, then forgotten
+        P.forget_threads()
+        P.use_threads(big)
+        assert numba.get_num_threads() == 1
+        seen = []                             # another Python thread has its own numba count
+        t = threading.Thread(target=lambda: seen.append((P.use_threads(big), numba.get_num_threads())))
+        t.start()
+        t.join()
+        assert seen == [(1, 1)]
+    finally:
+        P.set_max_threads(None)

@@ -199,3 +199,27 @@ def test_chunks_of_a_compact_body_span_layers(monkeypatch):
     assert len(lay["bounds"]) - 1 == n // 128
     assert shared < 0.5 * lay["shared_r"].shape[0] and buf < 0.8 * lay["boff"][-1]
     assert np.abs(f_new - f_old).max() <= 1e-12 * np.abs(f_old).max()
+
+
+@pytest.mark.parametrize("nan_at", [None, 2, 5])
+def test_chunk_stats_is_the_numpy_summary(nan_at):
+    """``chunk_stats``: the closest pair's rows renamed through the permutation where tracked
+    (-1 kept), the chunk of the smallest r^2 as ``np.argmin`` picks it (the first NaN if any),
+    and the smallest and sum of the counts column."""
+    from clusterdyn.calculators._cd_kernels import chunk_stats
+    rng = np.random.default_rng(7)
+    nk, n = 9, 50
+    stat = np.column_stack([rng.normal(size=nk), rng.uniform(0.5, 2.0, nk), rng.integers(-1, n, nk),
+                            rng.integers(-1, n, nk), rng.integers(-1, 4, nk), rng.uniform(size=nk)]).astype(float)
+    stat[3, 1] = stat[6, 1] = stat[:, 1].min() / 2          # a tie: the first one wins
+    if nan_at is not None:
+        stat[nan_at, 1] = stat[nan_at + 1, 1] = np.nan
+    perm = rng.permutation(n)
+    want = stat.copy()
+    for c in (2, 3):
+        ok = want[:, c] >= 0
+        want[ok, c] = perm[want[ok, c].astype(int)]
+    k, low, tot = chunk_stats(stat, perm)
+    assert np.array_equal(stat, want, equal_nan=True)
+    assert k == int(np.argmin(want[:, 1])) == (3 if nan_at is None else nan_at)
+    assert low == want[:, 4].min() and tot == want[:, 4].sum()
