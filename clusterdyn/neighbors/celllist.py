@@ -1153,8 +1153,8 @@ def _identity(perm_n):
 
 def _box_key(cell, pbc):
     """What :meth:`NeighborList.update` compares to tell whether the box changed since the build:
-    the bytes of the cell's nine float64 values and of the three periodic flags (0.3 us; as
-    tuples of Python values it took 4 us, a fiftieth of a step of 2 048 clusters).  A change of
+    the bytes of the cell's nine float64 values and of the three periodic flags (under 1 us;
+    as tuples of Python values it took 4 us, a fiftieth of a step of 2 048 clusters).  A change of
     bits that leaves the values equal (-0.0 for 0.0) rebuilds the list once more than needed."""
     pbc = np.asarray(pbc, dtype=bool)
     if pbc.shape != (3,):
@@ -1169,26 +1169,18 @@ def check_cell(cell, pbc):
     direction of zero length.
     """
     cell = np.asarray(cell, dtype=float).reshape(3, 3)
-    pbc = np.asarray(pbc, dtype=bool)
-    pbc = (pbc if pbc.shape == (3,) else np.broadcast_to(pbc, (3,))).copy()
-    # on Python floats: numpy's reductions over nine numbers took 33 us a build, a tenth of a
-    # small scene's build (a NaN anywhere makes a largest value NaN, as np.max does)
-    cl = cell.tolist()
-    flags = pbc.tolist()
-    if flags[0] or flags[1] or flags[2]:
-        off = [abs(cl[i][j]) for i in range(3) for j in range(3) if i != j]
-        big = [abs(v) for row in cl for v in row]
-        off = math.nan if any(v != v for v in off) else max(off)
-        big = math.nan if any(v != v for v in big) else max(big)
-        if off > 1e-10 * max(1.0, big):
+    pbc = np.broadcast_to(np.asarray(pbc, dtype=bool), (3,)).copy()
+    if pbc.any():
+        off = cell - np.diag(np.diag(cell))
+        if np.abs(off).max() > 1e-10 * max(1.0, np.abs(cell).max()):
             raise InputError("cell", cell.round(6).tolist(),
                              "an orthorhombic (diagonal) cell when any direction is periodic",
                              hint="triclinic periodic cells are not supported")
         for d in range(3):
-            if flags[d] and not cl[d][d] > 0:
+            if pbc[d] and not cell[d, d] > 0:
                 raise InputError("cell", cell.round(6).tolist(),
                                  f"a positive length along periodic axis {'xyz'[d]}")
-    return np.array([cl[0][0], cl[1][1], cl[2][2]]), pbc
+    return np.diag(cell).copy(), pbc
 
 
 #: the forward half of the 3x3x3 cell stencil (own cell and the 13 cells after it in slot
@@ -1314,7 +1306,6 @@ class NeighborList:
         self._brick_side = 0.0
         self.nlocal = 0                 # rebuilds the local test saved
         self._disp = np.zeros((DISP_BLOCKS, 7))
-        self._images = None             # (key, table) of _image_table
 
     def update(self, positions, cell, pbc, displacement=None):
         """Rebuild if needed; return True when rebuilt.
@@ -1484,20 +1475,12 @@ class NeighborList:
         self._pool = np.empty(size + size // 8, np.uint32)
 
     def _image_table(self, krange, box):
-        """Shifts of the periodic images within ``krange`` cells (rows of :attr:`image_sc`); kept
-        while the box and the reach are the same (made with a meshgrid: about 40 us a build,
-        which a small scene pays every few steps)."""
-        key = (tuple(int(k) for k in krange), np.ascontiguousarray(box, dtype=np.float64).tobytes())
-        if self._images is not None and self._images[0] == key:
-            return self._images[1]
         kx, ky, kz = krange
         ii = np.arange(-kx, kx + 1)
         jj = np.arange(-ky, ky + 1)
         ll = np.arange(-kz, kz + 1)
         img = np.array(np.meshgrid(ii, jj, ll, indexing="ij")).reshape(3, -1).T
-        table = np.ascontiguousarray(img * box[None, :])
-        self._images = (key, table)
-        return table
+        return np.ascontiguousarray(img * box[None, :])
 
     def _count_and_fill(self, xs, cell_n, start, order, ncell, krange, periodic_c, box, rcut, first_n):
         """The full-stencil search in two passes: count each row's pairs into ``first_n`` (zeroed,
