@@ -71,7 +71,7 @@ def use_threads(n):
 
     numba is told only when the count differs from the one this function last gave it on the
     calling thread (``numba.set_num_threads`` takes 1.4-1.9 us in a loop and more in a step, which
-    asks five times: caching it took 13-15 us off a step of about 105 on 32 clusters).  A count set with ``numba.set_num_threads``
+    asks five times: caching it took 10-15 us off a step of 101-112 us on 32 clusters).  A count set with ``numba.set_num_threads``
     between clusterdyn's calls therefore stays until clusterdyn's own count changes; limit
     clusterdyn's kernels with :func:`set_max_threads`, or call :func:`forget_threads` after
     setting numba's count directly.  The kernels' results do not depend on the count."""
