@@ -70,11 +70,12 @@ def use_threads(n):
     """Set numba's thread count for the coming kernels over n particles; returns it.
 
     numba is told only when the count differs from the one this function last gave it on the
-    calling thread (``numba.set_num_threads`` takes 1.4-1.9 us in a loop and more in a step, which
-    asks five times: caching it took 10-15 us off a step of 101-112 us on 32 clusters).  A count set with ``numba.set_num_threads``
-    between clusterdyn's calls therefore stays until clusterdyn's own count changes; limit
-    clusterdyn's kernels with :func:`set_max_threads`, or call :func:`forget_threads` after
-    setting numba's count directly.  The kernels' results do not depend on the count."""
+    calling thread (``numba.set_num_threads`` takes 1.4-1.9 us in a loop and more in a step,
+    which asks five times: caching it took 10-15 us off a step of 101-112 us on 32 clusters).
+    A count set with ``numba.set_num_threads`` between clusterdyn's calls therefore stays until
+    clusterdyn's own count changes; limit clusterdyn's kernels with :func:`set_max_threads`, or
+    call :func:`forget_threads` after setting numba's count directly.  The kernels' results do
+    not depend on the count."""
     k = threads_for(n)
     want = (_GEN[0], k)
     if getattr(_LAST, "set", None) != want:
