@@ -9,8 +9,9 @@ The scene is a periodic fcc box of aluminium clusters (r0 = 5 um, ``fcc_packing`
 cost, with nothing a scene adds.  Each worker is a fresh process that steps 100
 steps, then times ``--repeat`` windows of ``--steps`` steps and keeps the fastest
 (the process' CPU time: on a shared machine it leaves out the time the process waited for a
-core; one thread, so it is the step's own time).  With ``--against``, workers of the two checkouts alternate (each
-import of ``clusterdyn`` from its own tree through ``PYTHONPATH``) and each N's
+core; one thread, so it is the step's own time).  With ``--against``, workers of the two
+checkouts alternate (each import of ``clusterdyn`` from its own tree through ``PYTHONPATH``)
+and each N's
 line gives the median of the rounds for both, their ratio and whether the final
 positions agree to the bit.  A straight line t = a + b N fitted to each checkout's
 medians gives the fixed cost a (us a step) and the cost b a particle (ns a
@@ -35,7 +36,6 @@ sys.path.insert(0, str(HERE))
 def worker(n, steps, repeat):
     import hashlib
 
-    import numpy as np
     import numba
     from clusterdyn import units
     from clusterdyn.build import fcc_packing
