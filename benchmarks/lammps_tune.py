@@ -33,7 +33,10 @@ same positions and velocities.
    ``dpd/ext/tstat`` overlaid), each in its own process, repeats interleaved,
    all from the same state.  Ratios clusterdyn/LAMMPS at equal parallelism,
    and two-thread (two-rank) efficiency rate(2) / (2 rate(1)), best and per
-   repeat.
+   repeat.  Each repeat also measures clusterdyn's two-thread efficiency inside
+   one process (``--worker cd-eff``): windows of half the steps on 1, 2, 2 and 1
+   threads in turn, ``--eff-rounds`` times, so that both counts run in the same
+   spell of a shared machine's load.
 
 The machine may be shared: the load average is recorded beside every run.
 Results: ``benchmarks/results/lammps_tune.md`` and ``.json``.
