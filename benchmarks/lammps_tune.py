@@ -201,26 +201,24 @@ def lammps_rate(folder, procs):
             "memory_mb_total": r.memory_mb_total, "load": os.getloadavg()[0]}
 
 
-def _run_cd(state, J, threads, steps, sort_interval=0):
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "cd", "--state", str(state), "--J", J,
-           "--threads", str(threads), "--steps", str(steps), "--sort-interval", str(sort_interval)]
+def _worker(kind, state, J, *args):
+    """Run this script's ``--worker kind`` on the saved state; its JSON line, with the load average."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", kind, "--state", str(state), "--J", J,
+           *map(str, args)]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
     if p.returncode != 0:
         raise RuntimeError(p.stderr[-3000:])
     r = json.loads(p.stdout.strip().split("\n")[-1])
     r["load"] = os.getloadavg()[0]
     return r
+
+
+def _run_cd(state, J, threads, steps, sort_interval=0):
+    return _worker("cd", state, J, "--threads", threads, "--steps", steps, "--sort-interval", sort_interval)
 
 
 def _run_cd_eff(state, J, window, rounds):
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "cd-eff", "--state", str(state), "--J", J,
-           "--window", str(window), "--rounds", str(rounds)]
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
-    if p.returncode != 0:
-        raise RuntimeError(p.stderr[-3000:])
-    r = json.loads(p.stdout.strip().split("\n")[-1])
-    r["load"] = os.getloadavg()[0]
-    return r
+    return _worker("cd-eff", state, J, "--window", window, "--rounds", rounds)
 
 
 def fastest(rows, eligible, k=3):
