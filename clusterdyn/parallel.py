@@ -36,8 +36,9 @@ import threading  # noqa: E402
 import numba  # noqa: E402
 from numba import njit  # noqa: E402
 
-#: particles per thread below which a kernel runs on fewer threads
-MIN_PARTICLES_PER_THREAD = 16384
+#: particles per thread below which a kernel runs on fewer threads (two threads from 8 192
+#: particles; the pair loop's chunks are cut small enough for them, ``calculators._cd_kernels``)
+MIN_PARTICLES_PER_THREAD = 4096
 #: particles per block of the streaming passes (kicks, drift, gathers): fixed, so their
 #: results do not depend on the thread count
 STREAM_BLOCK = 8192

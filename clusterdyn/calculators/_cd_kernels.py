@@ -72,6 +72,10 @@ CHUNK_ROWS = 16384
 CHUNK_LAYERS = 16
 #: the fewest chunks that thick layers may bring the count down to
 MIN_CHUNKS = 16
+#: a list of fewer than ``FEW_CHUNKS * CHUNK_ROWS`` rows still gets up to this many chunks, of at
+#: least :data:`MIN_CHUNK_ROWS` rows, so that two to four threads share its pair loop
+FEW_CHUNKS = 4
+MIN_CHUNK_ROWS = 2048
 #: shared rows per block of :func:`reduce_shared`
 SHARED_BLOCK = 4096
 
@@ -84,10 +88,13 @@ def chunk_count(n, layer_rows):
     and held in the chunk's own buffer rows), so where layers are thick (a compact body of a
     million clusters: up to 22 000 rows a layer, half the rows shared at 16 384 rows a chunk)
     chunks are made :data:`CHUNK_LAYERS` layers long, as long as there are at least
-    :data:`MIN_CHUNKS`.  A property of the list alone, never of the thread count: the sums'
-    order, and so the forces' bits, do not depend on it.
+    :data:`MIN_CHUNKS`.  A small list (under ``FEW_CHUNKS * CHUNK_ROWS`` rows) is cut into up to
+    :data:`FEW_CHUNKS` chunks of at least :data:`MIN_CHUNK_ROWS` rows (8 192 rows: 4 chunks),
+    where a chunk of 16 384 rows would leave a second thread nothing to do in the pair loop.
+    A property of the list alone, never of the thread count: the sums' order, and so the
+    forces' bits, do not depend on it.
     """
-    nk = max(1, n // CHUNK_ROWS)
+    nk = max(1, n // CHUNK_ROWS, min(FEW_CHUNKS, n // MIN_CHUNK_ROWS))
     if layer_rows > 0:
         nk = min(nk, max(MIN_CHUNKS, n // (CHUNK_LAYERS * layer_rows)))
     return nk

@@ -243,7 +243,7 @@ def test_parallel_sort_and_bricks_are_the_serial_ones(cells):
     order of first appearance."""
     from clusterdyn.parallel import MIN_PARTICLES_PER_THREAD, set_max_threads
     rng = np.random.default_rng(3)
-    n = 4 * MIN_PARTICLES_PER_THREAD
+    n = max(4 * MIN_PARTICLES_PER_THREAD, 65536)
     pos = np.vstack([rng.uniform(0, 30.0, (n // 2, 3)), rng.normal(15.0, 60.0, (n // 2, 3))])
     pos = pos[rng.permutation(len(pos))]
     got = []

@@ -61,7 +61,7 @@ def test_centered_rebuild_ignores_a_moving_block():
 
 def test_forces_bit_identical_on_one_and_two_threads():
     """Chunks depend on the list only: the same sums in the same order on any thread count."""
-    s = build_shock(size=(32, 16, 16), u=3 * units.km_s, J=50, seed=3)    # 32768: two chunks
+    s = build_shock(size=(32, 16, 16), u=3 * units.km_s, J=50, seed=3)    # 32768: four chunks
     a, c = s.atoms, s.calc
     rng = np.random.default_rng(0)
     a.positions = a.positions + rng.normal(0, 0.02 * 5 * units.um, a.positions.shape)
@@ -78,7 +78,7 @@ def test_forces_bit_identical_on_one_and_two_threads():
     assert np.array_equal(f1, f2)
     assert np.array_equal(p1["forces"], p2["forces"]) and np.array_equal(p1["virials"], p2["virials"])
     assert p1["energy"] == p2["energy"]
-    assert len(c._buffers["bounds"]) - 1 == 2
+    assert len(c._buffers["bounds"]) - 1 == 4
 
 
 def test_sorted_kernels_match_a_direct_pair_sum():
@@ -165,6 +165,11 @@ def test_chunk_count_follows_the_layers_not_the_threads():
     thick = n // (K.CHUNK_LAYERS * 20)
     assert K.chunk_count(n, thick) == 20                           # CHUNK_LAYERS layers a chunk
     assert K.chunk_count(100, 50) == 1
+    # small lists: up to FEW_CHUNKS chunks of at least MIN_CHUNK_ROWS rows, for two to four threads
+    m = K.MIN_CHUNK_ROWS
+    assert [K.chunk_count(k * m, 0) for k in (1, 2, 3, 4, 8)] == [1, 2, 3, 4, 4]
+    assert K.chunk_count(2 * K.CHUNK_ROWS, 0) == K.FEW_CHUNKS == K.chunk_count(K.FEW_CHUNKS * K.CHUNK_ROWS, 0)
+    assert K.chunk_count((K.FEW_CHUNKS + 1) * K.CHUNK_ROWS, 0) == K.FEW_CHUNKS + 1
 
 
 def test_chunks_of_a_compact_body_span_layers(monkeypatch):
