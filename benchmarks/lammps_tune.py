@@ -337,7 +337,7 @@ def summarise(runs, threads):
     out = {}
     for r in runs:
         if r["engine"] == "clusterdyn-alternating":
-            e = out.setdefault(("clusterdyn-alternating", r["N"], r["J"]), {"rounds": []})
+            e = out.setdefault(("clusterdyn-alternating", r["N"], r["J"]), {"rounds": [], "window": r["window"]})
             e["rounds"] += [dict(x, repeat=r["repeat"]) for x in r["rounds"]]
             continue
         k = (r["engine"], r["N"], r["J"], r.get("threads", r.get("procs")))
@@ -412,7 +412,7 @@ def markdown(rep):
             if alt:
                 per = [x["efficiency"] for x in alt["rounds"]]
                 L.append(f"- two-thread efficiency, clusterdyn, damping {tag}, 1 and 2 threads alternating in one "
-                         f"process (windows of {m['steps'] // 2} steps, 1 2 2 1): per round "
+                         f"process (windows of {alt['window']} steps, 1 2 2 1): per round "
                          f"{', '.join(f'{x:.0%}' for x in per)}, **median {_median(per):.0%}**, "
                          f"range {min(per):.0%}-{max(per):.0%}")
             c1, l1 = s.get(("clusterdyn", N, J, 1)), s.get(("LAMMPS", N, J, 1))
@@ -480,7 +480,7 @@ def main(argv=None):
     out.with_suffix(".md").write_text(md)
     js = {"meta": meta, "threads": threads,
           "sizes": [{"tuning": s["tuning"], "runs": s["runs"],
-                     "summary": [dict(engine=k[0], N=k[1], J=k[2], rounds=v["rounds"]) if len(k) == 3 else
+                     "summary": [dict(engine=k[0], N=k[1], J=k[2], window=v["window"], rounds=v["rounds"]) if len(k) == 3 else
                                  dict(engine=k[0], N=k[1], J=k[2], par=k[3], best=v["best"], rates=v["rates"],
                                       loads=v["loads"]) for k, v in s["summary"].items()]} for s in sizes]}
     out.with_suffix(".json").write_text(json.dumps(js, indent=1, default=str))

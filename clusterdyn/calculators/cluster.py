@@ -207,12 +207,12 @@ class ClusterDynamics(Calculator):
         key = (mats, r0, float(prm["rc"]), prm["skin"], prm["n_table"])
         if key == self._setup_key:
             return
-        rc = check_rc(self.parameters.rc)
+        rc = check_rc(prm["rc"])
         self.potentials = [ClusterPotential(m, r, rc) for m, r in zip(mats, r0)]
-        coef, self.meta, self.tables = build_tables(self.potentials, int(self.parameters.n_table))
+        coef, self.meta, self.tables = build_tables(self.potentials, int(prm["n_table"]))
         self.coef, self.gtab = K.kernel_tables(coef, self.meta)
         r0min = min(r0)
-        skin = default_skin(rc) if self.parameters.skin is None else float(self.parameters.skin)
+        skin = default_skin(rc) if prm["skin"] is None else float(prm["skin"])
         if not skin >= 0:
             raise InputError("skin", self.parameters.skin, "a multiple of r0 >= 0")
         cutoff = max(t.cutoff for row in self.tables for t in row)
@@ -522,9 +522,8 @@ class ClusterDynamics(Calculator):
                 return
             self.last_stats["closest"]            # reruns the loop's tracking variant into stat
             nclose = stat[:, 4].sum()
+            x2 = stat[:, 1].min()
         if nclose > 0:
-            k = int(np.argmin(stat[:, 1]))
-            x2 = stat[k, 1]
             i, j = self.last_stats["closest"]  # may rerun the loop into the same buffers
             a, b = types[i], types[j]
             r0ab = 1.0 / math.sqrt(self.meta[a, b, 4])
