@@ -207,10 +207,49 @@ def _min_image(d, box):
 
 
 def _r0_of(atoms):
+    """The packing's r0: ``info['cd_r0']`` of clusterdyn's builders, else the nearest-neighbour distance
+    (so Atoms from ``ase.build.bulk`` work too)."""
     try:
         return float(atoms.info["cd_r0"][0])
     except (KeyError, IndexError, TypeError):
-        raise InputError("atoms", "Atoms without info['cd_r0']", "clusters from clusterdyn.build") from None
+        pass
+    if len(atoms) < 2:
+        raise InputError("atoms", f"{len(atoms)} atom(s) without info['cd_r0']",
+                         "at least two particles (the nearest-neighbour distance sets r0)")
+    tree, rel, _ = _tree(atoms)
+    d, _ = tree.query(rel, k=2)
+    return float(np.min(d[:, 1]))
+
+
+def _grains(atoms):
+    """``arrays['grain']``, or one grain 0 for Atoms without it (a single crystal, e.g. ``ase.build.bulk``)."""
+    if "grain" in atoms.arrays:
+        return atoms.arrays["grain"]
+    return np.zeros(len(atoms), dtype=np.int64)
+
+
+def spacegroup(atoms, symprec=1e-3):
+    """spglib's space group of ``atoms`` with ``symprec`` in units of the packing's r0.
+
+    spglib's tolerance is an absolute length.  A packing's cell is 1e4-1e6 Angstrom
+    across, and spglib's search misses the symmetry of a perfect packing at a tolerance
+    that is small in r0 but large in Angstrom (a [111] fcc packing at r0 = 5 um: Fm-3m at
+    ``symprec=1e-5`` Angstrom, no symmetry at 1e-3 r0 = 50 Angstrom); so the cell is
+    handed to spglib in units of r0 (``info['cd_r0']``, else the nearest-neighbour distance).
+
+    Returns
+    -------
+    str or None
+        e.g. ``'Fm-3m (225)'``; None where spglib finds no symmetry.
+    """
+    if not np.asarray(atoms.pbc, bool).all():
+        raise InputError("atoms.pbc", tuple(bool(p) for p in atoms.pbc),
+                         "a periodic cell on every axis (spglib needs a crystal)")
+    r0 = _r0_of(atoms)
+    cell = (atoms.cell[:] / r0, atoms.get_scaled_positions(), atoms.get_atomic_numbers())
+    with warnings.catch_warnings():          # spglib 2.5 deprecates returning None on failure
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return spglib.get_spacegroup(cell, symprec=symprec)
 
 
 def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.2, details=False):
@@ -233,7 +272,9 @@ def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.2, deta
     Parameters
     ----------
     atoms : ase.Atoms
-        Clusters with ``arrays['grain']`` and ``info['cd_r0']``.
+        Clusters with ``arrays['grain']`` and ``info['cd_r0']``; without ``grain`` every
+        particle is grain 0 (a single crystal), without ``cd_r0`` r0 is the
+        nearest-neighbour distance, so Atoms from ``ase.build.bulk`` work too.
     grain : int
         Grain id.
     details : bool
@@ -251,9 +292,7 @@ def grain_orientation(atoms, grain, shell=(0.8, 1.2), depth=2, symprec=0.2, deta
     InputError
         No such grain, too few interior clusters, or not fcc according to spglib.
     """
-    if "grain" not in atoms.arrays:
-        raise InputError("atoms", "Atoms without 'grain'", "a polycrystal (arrays['grain'])")
-    gid = atoms.arrays["grain"]
+    gid = _grains(atoms)
     mine = np.flatnonzero(gid == grain)
     if len(mine) == 0:
         raise InputError("grain", grain, f"a grain id present in atoms (0..{gid.max()})")

@@ -121,3 +121,21 @@ def test_misorientation_distribution(known):
     rec = np.array([grain_orientation(atoms, g) for g in range(27)])
     md2 = misorientation_distribution(atoms, rotations=rec)
     assert np.allclose(md2["angles_deg"], md["angles_deg"], atol=0.5)
+
+
+def test_spacegroup_of_a_111_packing_in_angstrom_and_bulk_atoms():
+    """spglib's tolerance is a length: spacegroup() takes it in r0, so a perfect [111] packing at
+    r0 = 5 um is Fm-3m at a tolerance that fails when handed to spglib in Angstrom; Atoms from
+    ase.build.bulk (no 'grain', no 'cd_r0') go through grain_orientation as one grain."""
+    import spglib
+    from ase.build import bulk
+    from clusterdyn import units
+    from clusterdyn.build import fcc_packing, spacegroup
+    a = fcc_packing("Al", r0=5 * units.um, size=(6, 6, 6), pbc=True, direction="111")
+    raw = (a.cell[:], a.get_scaled_positions(), a.get_atomic_numbers())
+    assert spglib.get_spacegroup(raw, symprec=1e-3 * 5 * units.um) is None     # the pitfall
+    assert spacegroup(a, symprec=1e-3) == "Fm-3m (225)"
+    cu = bulk("Cu", "fcc", a=3.6, cubic=True).repeat(4)
+    R = grain_orientation(cu, 0)
+    assert misorientation_angle(R, np.eye(3)) < 1e-6            # the cube axes, modulo cubic symmetry
+    assert spacegroup(cu) == "Fm-3m (225)"
