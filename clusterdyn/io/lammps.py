@@ -428,7 +428,9 @@ def drive_lines(atoms, dt):
     drive): a :class:`~clusterdyn.md.Traction`, a sticking wall, a callable
     U(t), any other constraint.
     """
-    from ..md.drives import Constant, Piston, Table, Traction, Wall
+    from ..md.histories import Constant, Table
+    from ..md.layer_drives import Piston, Traction
+    from ..md.wall import Wall
     groups, fixes, meta, held = [], [], {}, []
     V = units.VEL_TO_A_PER_PS
     for k, c in enumerate(atoms.constraints):

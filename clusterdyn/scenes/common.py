@@ -4,7 +4,7 @@ import time
 
 import numpy as np
 
-from ..md.drives import Piston
+from ..md.layer_drives import Piston
 
 
 def thermal_noise(atoms, rms, seed, exclude=None):

@@ -10,7 +10,7 @@ or given directly (``u``) or read from a CSV (``drive_csv``: a hydrocode's
 U(t) of a Lagrangian boundary, as the paper used).
 
 **Drive** (``drive``): ``pressure`` (the default) pushes the base layer with
-a normal stress history (:class:`~clusterdyn.md.drives.Traction`: the
+a normal stress history (:class:`~clusterdyn.md.layer_drives.Traction`: the
 target pressure for the plateau, then a linear release to zero stress); the
 layer is free to move, so after the pulse the base is a stress-free face,
 as the rear of a flyer.  ``piston`` moves the base layer with a prescribed

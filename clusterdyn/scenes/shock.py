@@ -23,7 +23,8 @@ from ..materials import cd_material_names, get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from ..md.drives import Piston, Table
+from ..md.histories import Table
+from ..md.layer_drives import Piston
 from .common import make_piston, matplotlib_agg, piston_layer, run_frames, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 
