@@ -93,7 +93,7 @@ class TrajectoryAnalysis:
             return
         if isinstance(traj, (str, bytes)) or hasattr(traj, "__fspath__"):
             if is_h5md_path(traj):
-                from ..io.h5md import H5MDReader
+                from ..io.h5md_reader import H5MDReader
                 with H5MDReader(os.fsdecode(traj)) as reader:
                     self.reader = reader
                     try:

@@ -13,7 +13,8 @@
   :func:`save_run`, :func:`load_run` -- a whole run (dynamics, calculator, drives) in one.
 """
 
-from clusterdyn.io.h5md import H5MDWriter, H5MDReader, read_h5md
+from clusterdyn.io.h5md_writer import H5MDWriter
+from clusterdyn.io.h5md_reader import H5MDReader, read_h5md
 from clusterdyn.io.info import h5md_info, format_info
 from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint, save_run, load_run, read_run_extra
 from clusterdyn.io.lammps import export_lammps, run_lammps  # noqa: F401  (LAMMPS scale-out)
