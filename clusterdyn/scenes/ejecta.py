@@ -76,7 +76,7 @@ import numpy as np
 from .. import units
 from ..analysis.ejecta import (BREAKOUT_FRACTION, FS_LAYER, G_TIP, MARGIN, EjectaRecorder, ShockProbe,
                                spectrum_table)
-from ..analysis.fragments import G_MAX
+from ..analysis.fragment_spectra import G_MAX
 from ..analysis.shock import hugoniot_interpolant
 from ..build import fcc_packing, along_axis, parse_axis, repeat_lengths
 from ..build.bodies import crystal_rotation, plane_spacing

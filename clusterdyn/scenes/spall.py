@@ -35,7 +35,8 @@ import math
 import numpy as np
 
 from .. import units
-from ..analysis.fragments import fragments, write_spectrum_csv
+from ..analysis.fragment_spectra import write_spectrum_csv
+from ..analysis.fragments import fragments
 from ..analysis.spall import LagrangianMap, pullback, ring_thickness, spall_plane, spall_strength, wave_speeds
 from ..build.lattice import SQRT2
 from ..errors import InputError

@@ -9,7 +9,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clusterdyn import units
-from clusterdyn.analysis import FragmentAnalysis, FragmentObserver, fragments
+from clusterdyn.analysis import FragmentAnalysis, FragmentObserver
+from clusterdyn.analysis.fragments import fragments
 from clusterdyn.errors import InputError
 
 R0 = 1.0          # Angstrom (the rule is scale-free; CD-sized samples below use 10 um)
@@ -157,9 +158,8 @@ def test_exclude_leaves_particles_out():
 
 
 def test_packed_images_round_trip_and_add():
-    import sys
     from numba import njit
-    F = sys.modules["clusterdyn.analysis.fragments"]
+    import clusterdyn.analysis.fragment_graph as F
 
     @njit
     def add(a, b):
@@ -303,3 +303,10 @@ def test_plots_and_csv(tmp_path):
     assert [float(r.split(",")[1]) for r in rows] == pytest.approx([2 / 7, 4 / 7, 1.0])
     table = f.write_csv(tmp_path / "fragments.csv").read_text().splitlines()
     assert table[0].startswith("fragment,g,mass_kg,com_x_um") and len(table) == 4
+
+
+def test_fragments_module_is_not_shadowed_by_its_function():
+    import types
+
+    import clusterdyn.analysis.fragments as F
+    assert isinstance(F, types.ModuleType) and F.fragments is fragments
