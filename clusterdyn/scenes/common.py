@@ -81,6 +81,12 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
     return t_run
 
 
+def piston_thickness(r0):
+    """Thickness of a scene's piston layer: 1.5 r0 (at least two atomic planes in every orientation),
+    less 1e-6 r0 so that no plane sits on the boundary (Angstrom, as ``r0``)."""
+    return 1.5 * r0 - 1e-6 * r0
+
+
 def piston_layer(atoms, thickness, axis=0):
     """Mask of the particles within ``thickness`` of the lowest coordinate along ``axis``."""
     x = atoms.positions[:, axis]
