@@ -308,10 +308,18 @@ class Drive:
         return c
 
     def get_state(self):
+        """The drive's state for a checkpoint (a dict with ``kind``, what :func:`from_state` reads)."""
         raise NotImplementedError
 
     def describe(self):
+        """A JSON-able summary in display units (H5MD metadata, :mod:`clusterdyn.io.metadata`)."""
         raise NotImplementedError
+
+    def lammps_form(self, atoms, dt, k):
+        """The drive's LAMMPS commands (a :class:`~clusterdyn.md.lammps_form.LammpsForm`) as constraint
+        ``k`` of ``atoms`` in a run of time step ``dt`` (ASE time); InputError, one line, naming what
+        has no faithful LAMMPS form.  The base has none."""
+        raise InputError("atoms.constraints", repr(self), f"drives with a LAMMPS form ({self.kind} has none)")
 
 
 class _Layer(Drive):

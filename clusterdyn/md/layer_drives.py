@@ -19,6 +19,7 @@ from ..errors import InputError
 from ._integrate import set_momenta_along, take_forces_along
 from .drives import _Layer, _is_f64, _masses, _unit
 from .histories import Constant, SmoothRamp, Table, as_history, describe_history, history_from_state
+from .lammps_form import LammpsForm, group_lines, table_formulas, variable_lines
 
 __all__ = ["Piston", "Traction"]
 
@@ -191,6 +192,60 @@ class Piston(_Layer):
              "impulse_N_s": (self.impulse / (units.N * units.s)).tolist(),
              "work_J": float(self.work / units.J)}
         return d
+
+    def lammps_form(self, atoms, dt, k):
+        """``fix move`` of the layer (group ``piston<k>``): ``move linear`` for a constant U, ``move
+        variable`` for a :class:`~clusterdyn.md.histories.Table` (:meth:`_lammps_table`).  Refused:
+        ``lateral='free'``, a callable or smooth-ramp U(t)."""
+        if self.lateral != "fixed":
+            raise InputError("atoms.constraints", repr(self), "pistons with lateral='fixed' (this export moves "
+                             "the whole layer with fix move)")
+        name = f"piston{k}"
+        ids = np.asarray(self.index) + 1
+        form = LammpsForm(groups=group_lines(name, ids), held=[name])
+        if isinstance(self.history, Constant):
+            v = (self.velocity_at(self.time) * units.VEL_TO_A_PER_PS).tolist()
+            form.fixes.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
+            form.meta[name] = {"kind": "Piston", "law": "constant", "n": int(ids.size), "velocity_A_per_ps": v}
+        elif isinstance(self.history, Table):
+            self._lammps_table(form, name, int(ids.size), dt)
+        else:
+            raise InputError("atoms.constraints", f"Piston with a {self.history.law} U(t) ({self.history!r})",
+                             "a constant or Table history (pass a Table: a Python callable or a smooth "
+                             "ramp has no LAMMPS form here)")
+        return form
+
+    def _lammps_table(self, form, name, n, dt):
+        """``fix move variable`` with equal-style displacement ``X(t) - X(t0)`` (t = clusterdyn's time,
+        ``time`` + the drive's time at export; exact for the piecewise-linear law, so the layer's
+        positions are the same in both codes) and velocity ``(X(t) - X(t - dt))/dt``, the mean of U
+        over the step just taken: the layer velocity clusterdyn's force pass sees (its half-step
+        velocity, used by the pair damping), so the damping is the same too; LAMMPS' dumps therefore
+        show that mean for the layer, not U(t) at the frame."""
+        V = units.VEL_TO_A_PER_PS
+        h = self.history
+        vals = h.values[:, None] * self.direction[None, :] if h.values.ndim == 1 else h.values
+        t_ps = h.times / units.PS
+        t0_ps = self.time / units.PS
+        if not dt > 0:
+            raise InputError("dyn", None, "the dynamics (its time step) for a piston with a U(t) table")
+        dt_ps = float(dt) * units.TIME_TO_PS
+        svar = f"{name}_t"
+        fixes = form.fixes
+        fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
+        fixes.append(f'variable        {svar}m equal "time+{t0_ps!r}-{dt_ps!r}"')
+        names = []
+        for d, ax in enumerate("xyz"):
+            _, x_terms = table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
+            _, xm_terms = table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}m")
+            fixes += variable_lines(f"{name}_d{ax}", x_terms)
+            fixes += variable_lines(f"{name}_d{ax}m", xm_terms)
+            fixes.append(f'variable        {name}_v{ax} equal "(v_{name}_d{ax}-v_{name}_d{ax}m)/{dt_ps!r}"')
+            names.append((f"v_{name}_d{ax}", f"v_{name}_v{ax}"))
+        fixes.append(f"fix             move_{name} {name} move variable "
+                     + " ".join(q[0] for q in names) + " " + " ".join(q[1] for q in names))
+        form.meta[name] = {"kind": "Piston", "law": "table", "n": n, "t0_ps": t0_ps,
+                           "t_ps": t_ps.tolist(), "velocity_A_per_ps": (vals * V).tolist()}
 
     def __repr__(self):
         lat = ", lateral='free'" if self.free else ""
@@ -382,6 +437,11 @@ class Traction(_Layer):
                 "law": "rigid layer: free along normal under R.n - stress*area, tangential velocity prescribed",
                 "impulse_N_s": (self.impulse / (units.N * units.s)).tolist(),
                 "work_J": float(self.work / units.J)}
+
+    def lammps_form(self, atoms, dt, k):
+        """Refused: a layer free along its normal under a stress history has no faithful LAMMPS form here."""
+        raise InputError("atoms.constraints", repr(self), "Piston or Wall drives (a traction has no faithful "
+                         "LAMMPS form in this export)")
 
     def __repr__(self):
         return (f"Traction({len(self.index)} particles, normal={self.normal.tolist()}, stress={self.stress!r}, "

@@ -7,6 +7,7 @@ from numba import njit
 from .. import units
 from ..errors import InputError, InstabilityError
 from .drives import Drive, _is_f64, _masses, _rows, _shuffle, _unit
+from .lammps_form import LammpsForm, group_lines
 
 __all__ = ["Wall", "wall_harmonic", "wall_energy", "kick_rows", "stick_rows"]
 
@@ -351,6 +352,48 @@ class Wall(Drive):
                 "n_particles": None if self.index is None else int(self.index.size),
                 "impulse_N_s": (self.impulse / (units.N * units.s)).tolist(),
                 "dissipated_J": float(self.dissipated / units.J)}
+
+    def lammps_form(self, atoms, dt, k):
+        """``region wall<k> plane ... side in units box`` and ``fix wall/region ... harmonic K 1.0 d_c``
+        (with ``fix_modify energy yes``), one fix per material when K differs by material.  Refused: a
+        sticking wall (LAMMPS' fix has no sticking law), a normal with a component along a periodic
+        axis (LAMMPS wraps periodic coordinates)."""
+        if self.sticking:
+            raise InputError("atoms.constraints", repr(self),
+                             "a frictionless wall (LAMMPS' fix wall/region has no sticking law)")
+        per = np.abs(self.normal[np.asarray(atoms.pbc, bool)])
+        if per.size and per.max() > 0:
+            raise InputError("atoms.constraints", repr(self), "a wall whose normal is perpendicular to the "
+                             "periodic axes (LAMMPS wraps periodic coordinates)")
+        K_t, dc_t = self.resolve(atoms)
+        name = f"wall{k}"
+        form = LammpsForm()
+        groups, fixes = form.groups, form.fixes
+        p, n = self.point.tolist(), self.normal.tolist()
+        fixes.append(f"region          {name} plane {p[0]!r} {p[1]!r} {p[2]!r} {n[0]!r} {n[1]!r} {n[2]!r} "
+                     "side in units box")
+        base = "all"
+        if self.index is not None:
+            groups += group_lines(f"{name}_sel", np.asarray(self.index) + 1)
+            base = f"{name}_sel"
+        targets = [(base, 0, "")]
+        if K_t.size > 1:
+            targets = []
+            for t in range(K_t.size):
+                g = f"{name}_type{t + 1}"
+                if base == "all":
+                    groups.append(f"group           {g} type {t + 1}")
+                else:
+                    groups.append(f"group           {g}_all type {t + 1}")
+                    groups.append(f"group           {g} intersect {g}_all {base}")
+                targets.append((g, t, f"_{t + 1}"))
+        for g, t, sfx in targets:
+            fixes.append(f"fix             {name}{sfx} {g} wall/region {name} harmonic "
+                         f"{float(K_t[t])!r} 1.0 {float(dc_t[t])!r}")
+            fixes.append(f"fix_modify      {name}{sfx} energy yes")
+        form.meta[name] = {"kind": "Wall", "point_A": p, "normal": n,
+                           "K_eV_per_A2": K_t.tolist(), "cutoff_A": dc_t.tolist()}
+        return form
 
     def __repr__(self):
         return (f"Wall(point={self.point.tolist()}, normal={self.normal.tolist()}, "

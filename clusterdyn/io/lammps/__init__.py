@@ -51,7 +51,7 @@ frames, final forces and timings back.
 """
 
 from .export import (BOND_MARK, DATA_FILE, DEFAULT_TABLE_POINTS, INPUT_FILE, META_FILE, TABLE_FILE,  # noqa: F401
-                     TERMS_PER_VARIABLE, aligned_points, check_deck, drive_lines, export_lammps,
+                     aligned_points, check_deck, drive_lines, export_lammps,
                      initial_bond_pairs, lammps_table_forces, pair_lines, table_entry_name, table_grid,
                      table_interpolation_error, type_masses, write_data, write_tables)
 from .run import (NKTV2P_METAL, LammpsRun, frame_atoms, lammps_available, mpirun_path, preload_mpi,  # noqa: F401

@@ -146,32 +146,6 @@ def table_interpolation_error(calc, n_points=DEFAULT_TABLE_POINTS, samples=40000
 
 # -- data file and input script --------------------------------------------------------------------
 
-def _ranges(ids):
-    """LAMMPS id list with ranges a:b for runs of consecutive ids."""
-    ids = np.sort(np.asarray(ids, dtype=np.int64))
-    out = []
-    if len(ids) == 0:
-        return out
-    start = prev = int(ids[0])
-    for x in ids[1:]:
-        x = int(x)
-        if x == prev + 1:
-            prev = x
-            continue
-        out.append(f"{start}:{prev}" if prev > start else f"{start}")
-        start = prev = x
-    out.append(f"{start}:{prev}" if prev > start else f"{start}")
-    return out
-
-
-def _group_lines(name, ids, per_line=200):
-    parts = _ranges(ids)
-    lines = []
-    for k in range(0, len(parts), per_line):
-        lines.append(f"group {name} id " + " ".join(parts[k:k + per_line]))
-    return lines
-
-
 def initial_bond_pairs(atoms, calc):
     """The set-up bonds of ``attraction="initial"`` as LAMMPS bonds: (nb, 2) rows i < j, sorted.
 
@@ -295,172 +269,30 @@ def write_data(atoms, types, path, margin, bonds=None):
     return np.array(lo), np.array(hi), mass_t
 
 
-#: terms per equal-style variable of a U(t) table (long tables are split over several variables)
-TERMS_PER_VARIABLE = 24
-
-
-def _table_formulas(times_ps, vals, t0_ps, s):
-    """LAMMPS formulas of U(s) and X(s) - X(t0) for one component of a piecewise-linear table.
-
-    ``U(s) = v_0 + sum_k ds_k r(s - t_k)`` with ``r(z) = (z + |z|)/2`` (exact in
-    floating point: z or 0; ds_k the slope change at knot k; held before the
-    first and after the last knot) and its integral ``X(s) = v_0 s + sum_k
-    ds_k r(s - t_k)^2 / 2``; ``s`` is the name of the variable holding
-    clusterdyn's time in ps.  Returns two lists of signed terms ("+a*...", "-b*...").
-    """
-    t = np.asarray(times_ps, dtype=float)
-    v = np.asarray(vals, dtype=float)
-    slopes = np.diff(v) / np.diff(t) if t.size > 1 else np.zeros(0)
-    ds = np.diff(np.concatenate(([0.0], slopes, [0.0])))
-
-    def term(c, expr=None):
-        c = float(c)
-        body = f"{abs(c)!r}" if expr is None else f"{abs(c)!r}*{expr}"
-        return ("-" if c < 0 else "+") + body
-
-    u_terms = [term(v[0])]
-    x_terms = [term(v[0], f"({s}-({float(t0_ps)!r}))")]
-    x0 = 0.0
-    for tk, dk in zip(t, ds):
-        if dk == 0.0:
-            continue
-        z = f"({s}-({float(tk)!r}))"
-        r = f"(0.5*({z}+abs({z})))"
-        u_terms.append(term(dk, r))
-        x_terms.append(term(0.5 * dk, f"{r}^2"))
-        x0 += 0.5 * float(dk) * max(float(t0_ps) - float(tk), 0.0) ** 2
-    if x0 != 0.0:
-        x_terms.append(term(-x0))
-    return u_terms, x_terms
-
-
-def _variable_lines(name, terms):
-    """``variable name equal "..."``, split over helper variables of TERMS_PER_VARIABLE terms."""
-    def join(ts):
-        text = "".join(ts)
-        return text[1:] if text.startswith("+") else "0.0" + text
-    if len(terms) <= TERMS_PER_VARIABLE:
-        return [f'variable        {name} equal "{join(terms)}"']
-    out, parts = [], []
-    for k in range(0, len(terms), TERMS_PER_VARIABLE):
-        part = f"{name}_{k // TERMS_PER_VARIABLE}"
-        out.append(f'variable        {part} equal "{join(terms[k:k + TERMS_PER_VARIABLE])}"')
-        parts.append(f"+v_{part}")
-    out.append(f'variable        {name} equal "{join(parts)}"')
-    return out
-
-
 def drive_lines(atoms, dt):
-    """LAMMPS commands for the drives of ``atoms.constraints``.
+    """LAMMPS commands for the drives of ``atoms.constraints``: each writes its own.
 
     Returns ``({'groups': [...], 'fixes': [...]}, meta, held)``: the group and
     fix (and variable, region) commands, a JSON-able description per drive
     for cd.json, and the names of the groups that ``fix move`` integrates
-    (not ``fix nve``).
-
-    - :class:`~clusterdyn.md.Piston` with a constant U: ``fix move linear vx vy vz``;
-    - Piston with a :class:`~clusterdyn.md.Table` U(t): ``fix move variable``
-      with equal-style displacement ``X(t) - X(t0)`` (t = clusterdyn's time,
-      ``time`` + the drive's time at export; exact for the piecewise-linear
-      law, so the layer's positions are the same in both codes) and velocity
-      ``(X(t) - X(t - dt))/dt``, the mean of U over the step just taken: the
-      layer velocity clusterdyn's force pass sees (its half-step velocity, used
-      by the pair damping), so the damping is the same too; LAMMPS' dumps
-      therefore show that mean for the layer, not U(t) at the frame;
-    - :class:`~clusterdyn.md.Wall`: ``region plane px py pz nx ny nz side in
-      units box`` and ``fix wall/region ... harmonic K 1.0 d_c`` (with
-      ``fix_modify energy yes``), one fix per material when K differs by
-      material; its normal must be perpendicular to the periodic axes
-      (LAMMPS wraps periodic coordinates);
-
-    refused in one line (:class:`~clusterdyn.errors.InputError` naming the
-    drive): a :class:`~clusterdyn.md.Traction`, a sticking wall, a callable
-    U(t), any other constraint.
+    (not ``fix nve``).  Every constraint gives its commands through its
+    ``lammps_form(atoms, dt, k)`` (:class:`~clusterdyn.md.lammps_form.LammpsForm`;
+    :meth:`clusterdyn.md.layer_drives.Piston.lammps_form`,
+    :meth:`clusterdyn.md.wall.Wall.lammps_form`), which refuses in one line
+    what has no faithful form (a traction, a sticking wall, a callable or
+    smooth-ramp U(t), a piston with free lateral motion); a constraint
+    without one (e.g. ASE's) is refused by name.
     """
-    from ...md.histories import Constant, Table
-    from ...md.layer_drives import Piston, Traction
-    from ...md.wall import Wall
     groups, fixes, meta, held = [], [], {}, []
-    V = units.VEL_TO_A_PER_PS
     for k, c in enumerate(atoms.constraints):
-        if isinstance(c, Piston):
-            if c.lateral != "fixed":
-                raise InputError("atoms.constraints", repr(c), "pistons with lateral='fixed' (this export moves "
-                                 "the whole layer with fix move)")
-            name = f"piston{k}"
-            ids = np.asarray(c.index) + 1
-            groups += _group_lines(name, ids)
-            held.append(name)
-            if isinstance(c.history, Constant):
-                v = (c.velocity_at(c.time) * V).tolist()
-                fixes.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
-                meta[name] = {"kind": "Piston", "law": "constant", "n": int(ids.size), "velocity_A_per_ps": v}
-            elif isinstance(c.history, Table):
-                h = c.history
-                vals = h.values[:, None] * c.direction[None, :] if h.values.ndim == 1 else h.values
-                t_ps = h.times / units.PS
-                t0_ps = c.time / units.PS
-                if not dt > 0:
-                    raise InputError("dyn", None, "the dynamics (its time step) for a piston with a U(t) table")
-                dt_ps = float(dt) * units.TIME_TO_PS
-                svar = f"{name}_t"
-                fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
-                fixes.append(f'variable        {svar}m equal "time+{t0_ps!r}-{dt_ps!r}"')
-                names = []
-                for d, ax in enumerate("xyz"):
-                    _, x_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
-                    _, xm_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}m")
-                    fixes += _variable_lines(f"{name}_d{ax}", x_terms)
-                    fixes += _variable_lines(f"{name}_d{ax}m", xm_terms)
-                    fixes.append(f'variable        {name}_v{ax} equal "(v_{name}_d{ax}-v_{name}_d{ax}m)/{dt_ps!r}"')
-                    names.append((f"v_{name}_d{ax}", f"v_{name}_v{ax}"))
-                fixes.append(f"fix             move_{name} {name} move variable "
-                             + " ".join(n[0] for n in names) + " " + " ".join(n[1] for n in names))
-                meta[name] = {"kind": "Piston", "law": "table", "n": int(ids.size), "t0_ps": t0_ps,
-                              "t_ps": t_ps.tolist(), "velocity_A_per_ps": (vals * V).tolist()}
-            else:
-                raise InputError("atoms.constraints", f"Piston with a {c.history.law} U(t) ({c.history!r})",
-                                 "a constant or Table history (pass a Table: a Python callable or a smooth "
-                                 "ramp has no LAMMPS form here)")
-        elif isinstance(c, Wall):
-            if c.sticking:
-                raise InputError("atoms.constraints", repr(c),
-                                 "a frictionless wall (LAMMPS' fix wall/region has no sticking law)")
-            per = np.abs(c.normal[np.asarray(atoms.pbc, bool)])
-            if per.size and per.max() > 0:
-                raise InputError("atoms.constraints", repr(c), "a wall whose normal is perpendicular to the "
-                                 "periodic axes (LAMMPS wraps periodic coordinates)")
-            K_t, dc_t = c.resolve(atoms)
-            name = f"wall{k}"
-            p, n = c.point.tolist(), c.normal.tolist()
-            fixes.append(f"region          {name} plane {p[0]!r} {p[1]!r} {p[2]!r} {n[0]!r} {n[1]!r} {n[2]!r} "
-                         "side in units box")
-            base = "all"
-            if c.index is not None:
-                groups += _group_lines(f"{name}_sel", np.asarray(c.index) + 1)
-                base = f"{name}_sel"
-            targets = [(base, 0, "")]
-            if K_t.size > 1:
-                targets = []
-                for t in range(K_t.size):
-                    g = f"{name}_type{t + 1}"
-                    if base == "all":
-                        groups.append(f"group           {g} type {t + 1}")
-                    else:
-                        groups.append(f"group           {g}_all type {t + 1}")
-                        groups.append(f"group           {g} intersect {g}_all {base}")
-                    targets.append((g, t, f"_{t + 1}"))
-            for g, t, sfx in targets:
-                fixes.append(f"fix             {name}{sfx} {g} wall/region {name} harmonic "
-                             f"{float(K_t[t])!r} 1.0 {float(dc_t[t])!r}")
-                fixes.append(f"fix_modify      {name}{sfx} energy yes")
-            meta[name] = {"kind": "Wall", "point_A": p, "normal": n,
-                          "K_eV_per_A2": K_t.tolist(), "cutoff_A": dc_t.tolist()}
-        elif isinstance(c, Traction):
-            raise InputError("atoms.constraints", repr(c), "Piston or Wall drives (a traction has no faithful "
-                             "LAMMPS form in this export)")
-        else:
+        lammps_form = getattr(c, "lammps_form", None)
+        if lammps_form is None:
             raise InputError("atoms.constraints", type(c).__name__, "Piston or Wall drives (exportable as fixes)")
+        form = lammps_form(atoms, dt, k)
+        groups += form.groups
+        fixes += form.fixes
+        meta.update(form.meta)
+        held += form.held
     return {"groups": groups, "fixes": fixes}, meta, held
 
 
@@ -551,7 +383,8 @@ def check_deck(atoms, calc, dyn):
     Refused (:class:`~clusterdyn.errors.InputError`, one line): a calculator
     other than ClusterDynamics, dynamics other than clusterdyn's
     :class:`~clusterdyn.md.DampedVerlet` or ASE's velocity Verlet (both are
-    velocity Verlet, which ``fix nve`` is), a drive without a LAMMPS form
+    velocity Verlet, which ``fix nve`` is), a dynamics with a region of
+    interest (its removal has no form here), a drive without a LAMMPS form
     (:func:`drive_lines`), one-sided set-up bonds (:func:`initial_bond_pairs`),
     masses that differ within a material, a non-orthorhombic periodic cell.
     Returns ``(drive commands, drive meta, held groups, bonds or None)``.
@@ -564,6 +397,10 @@ def check_deck(atoms, calc, dyn):
         raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
     if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
         raise InputError("dyn", type(dyn).__name__, "DampedVerlet or ASE's VelocityVerlet (LAMMPS' fix nve)")
+    region = getattr(dyn, "region", None)
+    if region is not None:
+        raise InputError("region", repr(region), "no region of interest (removing the particles that leave "
+                         "it has no LAMMPS form in this export)")
     calc.setup(atoms)
     dt = float(dyn.dt) if dyn is not None else 0.0
     drive_cmds, groups, held = drive_lines(atoms, dt)
