@@ -17,7 +17,7 @@ feed an H5MD writer).
 import numpy as np
 
 from ..errors import InputError
-from .base import Results
+from .base import Analysis, Results
 from .fragment_graph import FragmentFinder, _bond_factor, _calc_parameter, _material_ids, _r0_per_material
 from .fragment_spectra import G_MAX
 
@@ -79,14 +79,16 @@ def _frame_summary(f, g_max):
             "nbonds": f.nbonds}
 
 
-class FragmentAnalysis:
-    """Fragments of every frame of a trajectory (the shape of MDAnalysis' ``AnalysisBase``).
+class FragmentAnalysis(Analysis):
+    """Fragments of every frame of a trajectory (:class:`~clusterdyn.analysis.base.Analysis`).
 
     Parameters
     ----------
-    trajectory : str, os.PathLike, H5MDReader, or sequence of ase.Atoms
+    trajectory : str, os.PathLike, H5MDReader, sequence of ase.Atoms, or None
         An H5MD file (read with :class:`clusterdyn.io.H5MDReader`), an open
-        reader, or a list of Atoms.
+        reader, or a list of Atoms; None for online use only
+        (``FragmentAnalysis(None, b=1.15).attach(dyn, interval=n)``, then
+        :meth:`conclude` after the run: the same results over the steps taken).
     b, r0, pairs, volumes, exclude
         As :func:`fragments`.  For a file, ``b`` and ``r0`` default to the
         scene parameters stored in it (``/parameters/scene``: ``rc``, ``r0``)
@@ -101,7 +103,7 @@ class FragmentAnalysis:
     Attributes
     ----------
     results : Results
-        After :meth:`run`, arrays over the analysed frames: ``frames``,
+        After :meth:`run` (or :meth:`conclude` online), arrays over the analysed frames: ``frames``,
         ``steps``, ``times`` (ASE time), ``n_fragments``, ``largest`` (g of
         the largest fragment), ``n_small``, ``small_mass_fraction``,
         ``nbonds``, and ``fragments`` (list of :class:`Fragments`) with ``keep``.
@@ -114,56 +116,33 @@ class FragmentAnalysis:
 
     def __init__(self, trajectory, b=None, *, r0=None, pairs=None, volumes=None, exclude=None,
                  g_max=G_MAX, keep=True):
-        self._own = False
-        if isinstance(trajectory, (str, bytes)) or hasattr(trajectory, "__fspath__"):
-            from ..io import H5MDReader
-            trajectory = H5MDReader(trajectory)
-            self._own = True
-        if not (hasattr(trajectory, "__len__") and hasattr(trajectory, "__getitem__")):
+        is_path = isinstance(trajectory, (str, bytes)) or hasattr(trajectory, "__fspath__")
+        if trajectory is not None and not (is_path or (hasattr(trajectory, "__len__")
+                                                       and hasattr(trajectory, "__getitem__"))):
             raise InputError("trajectory", type(trajectory).__name__,
-                             "an H5MD path, an H5MDReader or a sequence of ase.Atoms")
-        self.trajectory = trajectory
-        params = getattr(trajectory, "parameters", None) or {}
-        self._file_b = params.get("rc") if isinstance(params, dict) else None
-        self._file_r0 = params.get("r0") if isinstance(params, dict) else None
-        meta = getattr(trajectory, "metadata", None)
-        calc = (meta or {}).get("calculator") if isinstance(meta, dict) else None
-        if isinstance(calc, dict) and calc.get("rc") is not None:
-            self._file_b = float(calc["rc"])          # the run's cutoff from the file's metadata
-        if pairs is None and getattr(trajectory, "has", {}).get("pairs"):
-            pairs = _file_pairs(trajectory)       # MCA: the linked pairs stored on every frame
+                             "an H5MD path, an H5MDReader, a sequence of ase.Atoms, or None (online use)")
+        super().__init__(trajectory)
+        self._pairs = pairs
         self.finder = FragmentFinder(b, r0=r0, pairs=pairs, volumes=volumes, exclude=exclude)
         self.g_max = int(g_max)
         self.keep = bool(keep)
-        self.results = Results()
-
-    def _frame_indices(self, start, stop, step):
-        return range(len(self.trajectory))[slice(start, stop, step)]
-
-    def run(self, start=None, stop=None, step=None, progress=False):
-        """Analyse frames ``start:stop:step``; returns self (results in :attr:`results`)."""
-        frames = self._frame_indices(start, stop, step)
-        self._prepare()
-        it = frames
-        if progress:
-            from tqdm.auto import tqdm
-            it = tqdm(frames, desc="fragments", unit="frame", leave=False)
-        try:
-            for i in it:
-                atoms = self.trajectory[i]
-                self._single_frame(i, atoms)
-        finally:
-            if self._own:
-                self.trajectory.close()
-                self._own = False
-        self._conclude()
-        return self
 
     def _prepare(self):
         self._rows = []
         self._frags = []
+        src = self.reader if self.reader is not None else self._trajectory
+        params = getattr(src, "parameters", None) or {}
+        self._file_b = params.get("rc") if isinstance(params, dict) else None
+        self._file_r0 = params.get("r0") if isinstance(params, dict) else None
+        meta = getattr(src, "metadata", None)
+        calc = (meta or {}).get("calculator") if isinstance(meta, dict) else None
+        if isinstance(calc, dict) and calc.get("rc") is not None:
+            self._file_b = float(calc["rc"])          # the run's cutoff from the file's metadata
+        self.finder.pairs = self._pairs
+        if self._pairs is None and getattr(src, "has", {}).get("pairs"):
+            self.finder.pairs = _file_pairs(src)      # MCA: the linked pairs stored on every frame
 
-    def _single_frame(self, index, atoms):
+    def _single_frame(self, atoms):
         fin = self.finder
         b, r0 = fin.b, fin.r0
         if fin.pairs is None:
@@ -175,6 +154,7 @@ class FragmentAnalysis:
             f = fin.find(atoms)
         finally:
             fin.b, fin.r0 = b, r0
+        index = self._frame_index
         row = _frame_summary(f, self.g_max)
         row["frame"] = index
         row["step"] = atoms.info.get("step", index)
@@ -211,7 +191,7 @@ def _file_pairs(reader):
     return pairs
 
 
-class FragmentObserver:
+class FragmentObserver(Analysis):
     """Fragment counts during a run: ``dyn.attach(FragmentObserver(atoms, dyn=dyn), interval=n)``.
 
     Each call finds the fragments of ``atoms`` (:class:`FragmentFinder`) and
@@ -245,6 +225,7 @@ class FragmentObserver:
 
     def __init__(self, atoms, b=None, *, r0=None, pairs=None, volumes=None, exclude=None, dyn=None,
                  g_max=G_MAX, keep=False):
+        super().__init__(None)
         self.atoms = atoms
         self.dyn = dyn
         self.finder = FragmentFinder(b, r0=r0, pairs=pairs, volumes=volumes, exclude=exclude)
@@ -253,7 +234,7 @@ class FragmentObserver:
         self.last = None
         self._key = None
         self._summary = None
-        self.results = Results(steps=[], times=[], fragments=[], **{k: [] for k in self.NAMES})
+        self._reset()
         # fail now, not at the first call, when no bond rule can be found
         if pairs is None:
             _bond_factor(atoms, b)
@@ -280,8 +261,13 @@ class FragmentObserver:
         self._key = key
         return self._summary
 
-    def __call__(self):
-        s = self._current()
+    def _reset(self):
+        super()._reset()
+        # the record grows with every call (it is the result: _conclude has nothing to add)
+        self.results = Results(steps=[], times=[], fragments=[], **{k: [] for k in self.NAMES})
+
+    def _single_frame(self, atoms):
+        s = self._current(atoms)
         r = self.results
         r.steps.append(int(self.dyn.nsteps) if self.dyn is not None else len(r.steps))
         r.times.append(float(self.dyn.get_time()) if self.dyn is not None else np.nan)
@@ -289,6 +275,10 @@ class FragmentObserver:
             r[k].append(s[k])
         if self.keep:
             r.fragments.append(self.last)
+
+    def __call__(self):
+        """Analyse :attr:`atoms` now (``dyn.attach(obs, interval=n)``)."""
+        self.observe(self.atoms, int(self.dyn.nsteps) if self.dyn is not None else None)
 
     def arrays(self):
         """The records as arrays: ``steps``, ``times`` (ASE time) and the counts."""

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import units
 from ..errors import InputError
-from .base import TrajectoryAnalysis
+from .base import Analysis
 from .slabs import stress_profile
 from .stress import VOIGT_NAMES, particle_virials
 
@@ -96,7 +96,7 @@ class ProfileRecorder:
         return res
 
 
-class TrajectoryProfiles(TrajectoryAnalysis):
+class TrajectoryProfiles(Analysis):
     """Stress, intensity, density and velocity profiles for every frame of a trajectory.
 
     ``TrajectoryProfiles(trajectory, ...).run(start, stop, step)`` fills

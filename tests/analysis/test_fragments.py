@@ -265,6 +265,7 @@ def test_observer_records_counts_during_a_run_and_feeds_h5md(tmp_path):
     a.calc = ClusterDynamics(rc=1.15)
     dyn = DampedVerlet(a, J=None)
     obs = FragmentObserver(a, dyn=dyn, keep=True)
+    online = FragmentAnalysis(None, b=1.15, r0=r0).attach(dyn, interval=20)     # the same analysis, online
     path = tmp_path / "pull.h5md"
     writer = H5MDWriter(str(path), a, dyn=dyn, observables=obs.observables())
     dyn.attach(obs, interval=20)
@@ -288,6 +289,10 @@ def test_observer_records_counts_during_a_run_and_feeds_h5md(tmp_path):
     assert fa.results.steps.tolist() == rec["steps"].tolist()
     assert fa.results.fragments[-1].velocity[:, 0] == pytest.approx(
         obs.results.fragments[-1].velocity[:, 0], rel=1e-5)
+    online.conclude()
+    assert online.results.steps.tolist() == rec["steps"].tolist() == online.frames
+    assert online.results.n_fragments.tolist() == fa.results.n_fragments.tolist()
+    assert online.results.largest.tolist() == fa.results.largest.tolist()
     fa2 = FragmentAnalysis(path, b=1.15, r0=r0, keep=False).run(start=2, step=3)
     assert fa2.results.frames.tolist() == [2, 5, 8] and "fragments" not in fa2.results
 
