@@ -180,7 +180,7 @@ DEFAULT_OBSERVABLE_FUNCS = {
 
 
 def chunks(shape, itemsize):
-    """Chunk shape: one frame, at most ~1 MiB, for a (0, *shape) dataset."""
+    """Chunk shape: one frame, at most ~1 MiB, for a dataset of shape ``(0, *shape)``."""
     if not shape:
         return (1024,)
     per_row = itemsize * int(np.prod(shape[1:], dtype=np.int64)) if len(shape) > 1 else itemsize

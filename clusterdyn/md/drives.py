@@ -81,6 +81,15 @@ cannot be stored: checkpointing it raises :class:`~clusterdyn.errors.InputError`
 (pass a :class:`~clusterdyn.md.histories.Table` instead).  ``describe()`` gives a JSON-able summary in
 display units (km/s, ns, um, GPa) for H5MD metadata.
 
+LAMMPS
+------
+``lammps_form(atoms, dt, k)`` gives the drive's own commands for a LAMMPS
+deck (:class:`~clusterdyn.md.lammps_form.LammpsForm`, what
+:mod:`clusterdyn.io.lammps` writes) or refuses in one line the setting
+that has none.  So a drive lives in one class: its physics, its
+``describe()``, its state (``kind`` names it for :func:`from_state`: every
+subclass that sets its own ``kind`` is found there) and its LAMMPS form.
+
 The drives deliberately have no ``todict()``: ASE rebuilds only the
 constraints it knows, so a ``.traj`` file with one would be unreadable.
 """
