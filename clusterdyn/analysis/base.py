@@ -1,16 +1,24 @@
-"""Analyses over a trajectory, in the shape of MDAnalysis' ``AnalysisBase``.
+"""One analysis shape, offline and online, after MDAnalysis' ``AnalysisBase``.
 
-A subclass of :class:`TrajectoryAnalysis` implements ``_prepare()``,
-``_single_frame(atoms)`` and ``_conclude()``; ``run(start, stop, step)``
-walks the frames and leaves the outcome in ``results`` (a dict with
-attribute access, like MDAnalysis' ``Results``).  The trajectory is any of
+A subclass of :class:`Analysis` implements ``_prepare()``,
+``_single_frame(atoms)`` and ``_conclude()``; the outcome is left in
+``results`` (a dict with attribute access, like MDAnalysis' ``Results``).
+The same subclass runs
 
-- a path of an H5MD file (opened with :class:`clusterdyn.io.H5MDReader` for
-  the run; the analysis then sees the file's metadata through ``self.reader``:
-  material table, calculator, drives),
-- an open :class:`~clusterdyn.io.H5MDReader`,
-- a sequence or iterable of :class:`ase.Atoms`,
-- a path of another file ``ase.io`` reads.
+* **offline**: ``Analysis(trajectory).run(start, stop, step)`` walks the
+  frames of a trajectory, any of
+
+  - a path of an H5MD file (opened with :class:`clusterdyn.io.H5MDReader` for
+    the run; the analysis then sees the file's metadata through ``self.reader``:
+    material table, calculator, drives),
+  - an open :class:`~clusterdyn.io.H5MDReader`,
+  - a sequence or iterable of :class:`ase.Atoms`,
+  - a path of another file ``ase.io`` reads;
+
+* **online**: ``analysis.attach(dyn, interval=n)`` analyses ``dyn.atoms``
+  every ``n`` steps of a running dynamics (``self.reader`` is None, the
+  frame index is the step); :meth:`Analysis.observe` analyses one
+  configuration by hand; :meth:`Analysis.conclude` then fills ``results``.
 """
 
 import itertools
@@ -18,7 +26,7 @@ import os
 
 from ..errors import InputError
 
-__all__ = ["Results", "TrajectoryAnalysis", "is_h5md_path"]
+__all__ = ["Results", "Analysis", "is_h5md_path"]
 
 
 class Results(dict):
@@ -47,44 +55,48 @@ def is_h5md_path(trajectory):
     return False
 
 
-class TrajectoryAnalysis:
-    """Base of analyses over the frames of a trajectory (MDAnalysis' AnalysisBase shape).
+class Analysis:
+    """Base of analyses over frames, offline (a trajectory) or online (a running dynamics).
 
     Parameters
     ----------
-    trajectory : path, H5MDReader, or sequence/iterable of ase.Atoms
-        See the module docstring.
+    trajectory : path, H5MDReader, or sequence/iterable of ase.Atoms, optional
+        See the module docstring; None for an analysis used online only.
 
     Attributes
     ----------
     results : Results
-        Filled by :meth:`run`.
+        Filled by :meth:`run` (offline) or :meth:`conclude` (online).
     reader : H5MDReader or None
         The open reader while :meth:`run` walks an H5MD trajectory.
     frames : list of int
-        Indices of the frames analysed (after :meth:`run`).
+        Indices of the frames analysed (online: the dynamics' step numbers).
     """
 
-    def __init__(self, trajectory):
+    def __init__(self, trajectory=None):
         self._trajectory = trajectory
         self.reader = None
         self.results = Results()
         self.frames = []
+        self._prepared = False
 
     # -- to implement ----------------------------------------------------------
     def _prepare(self):
         """Called once before the first frame (``self.reader`` is set for H5MD files)."""
 
     def _single_frame(self, atoms):
-        """Analyse one frame (``self._frame_index``: its index in the trajectory)."""
+        """Analyse one frame (``self._frame_index``: its index in the trajectory, or the step online)."""
         raise NotImplementedError
 
     def _conclude(self):
         """Called once after the last frame: fill ``self.results``."""
 
-    # -- the loop ----------------------------------------------------------------
+    # -- offline -----------------------------------------------------------------
     def _iter_frames(self, start, stop, step):
         traj = self._trajectory
+        if traj is None:
+            raise InputError("trajectory", None, "a trajectory to run over (or use the analysis online: "
+                             "attach(dyn) / observe(atoms))")
         sl = slice(start, stop, step)
         if hasattr(traj, "get_atoms") and hasattr(traj, "n_frames"):    # an H5MDReader
             self.reader = traj
@@ -93,7 +105,7 @@ class TrajectoryAnalysis:
             return
         if isinstance(traj, (str, bytes)) or hasattr(traj, "__fspath__"):
             if is_h5md_path(traj):
-                from ..io.h5md import H5MDReader
+                from ..io.h5md_reader import H5MDReader
                 with H5MDReader(os.fsdecode(traj)) as reader:
                     self.reader = reader
                     try:
@@ -113,23 +125,66 @@ class TrajectoryAnalysis:
                              "non-negative values for a trajectory that is only iterable")
         yield from itertools.islice(enumerate(traj), start, stop, step)
 
-    def run(self, start=None, stop=None, step=None):
-        """Analyse frames ``start:stop:step`` (Python slice semantics); returns ``self``."""
-        self.results = Results()
-        self.frames = []
+    def _n_frames(self, start, stop, step):
+        """The number of frames :meth:`run` will visit, or None when the trajectory is only iterable."""
+        traj = self._trajectory
+        n = getattr(traj, "n_frames", None)
+        if n is None and hasattr(traj, "__len__") and not isinstance(traj, (str, bytes)):
+            n = len(traj)
+        return None if n is None else len(range(*slice(start, stop, step).indices(n)))
+
+    def run(self, start=None, stop=None, step=None, progress=False):
+        """Analyse frames ``start:stop:step`` (Python slice semantics); returns ``self``.
+
+        ``progress``: a tqdm bar over the frames.
+        """
+        self._reset()
         frames = self._iter_frames(start, stop, step)
-        prepared = False
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
+            bar = tqdm(total=self._n_frames(start, stop, step), desc=type(self).__name__, unit="frame",
+                       leave=False)
         try:
             for i, atoms in frames:
-                if not prepared:
-                    self._prepare()
-                    prepared = True
-                self._frame_index = i
-                self.frames.append(i)
-                self._single_frame(atoms)
+                self.observe(atoms, i)
+                if bar is not None:
+                    bar.update(1)
         finally:
             frames.close()
-        if not prepared:
+            if bar is not None:
+                bar.close()
+        return self.conclude()
+
+    # -- online ------------------------------------------------------------------
+    def _reset(self):
+        self.results = Results()
+        self.frames = []
+        self._prepared = False
+
+    def observe(self, atoms, index=None):
+        """Analyse one configuration now (``index``: its frame index; default the count so far)."""
+        if not self._prepared:
+            self._prepare()
+            self._prepared = True
+        i = len(self.frames) if index is None else index
+        self._frame_index = i
+        self.frames.append(i)
+        self._single_frame(atoms)
+
+    def attach(self, dyn, interval=1):
+        """Analyse ``dyn.atoms`` every ``interval`` steps of ``dyn`` (an ASE observer; the frame index is
+        ``dyn.nsteps``); call :meth:`conclude` after the run.  Returns ``self``."""
+        self._reset()
+        dyn.attach(self._observe_dyn, interval, dyn)
+        return self
+
+    def _observe_dyn(self, dyn):
+        self.observe(dyn.atoms, int(dyn.nsteps))
+
+    def conclude(self):
+        """Fill ``results`` from the frames analysed so far; returns ``self``."""
+        if not self._prepared:
             raise InputError("trajectory", "no frames", "at least one frame to analyse")
         self._conclude()
         return self

@@ -28,7 +28,8 @@ import numpy as np
 
 from .. import units
 from ..errors import InputError
-from .fragments import G_MAX, fragments
+from .fragment_spectra import G_MAX
+from .fragments import fragments
 
 __all__ = ["Dispersed", "dispersed", "layer_counts", "cross_section"]
 

@@ -5,7 +5,7 @@ The sample is periodic across (the lateral axes ``u = (axis + 1) % 3`` and
 +axis (:func:`clusterdyn.build.profiled_sample`).  The measures of one frame
 (:func:`ejecta_frame`), with the definitions the scenes state:
 
-* **Body**: the clusters of fragments (:func:`clusterdyn.analysis.fragments`,
+* **Body**: the clusters of fragments (:func:`clusterdyn.analysis.fragments.fragments`,
   bond distance b r0, default the cutoff) with more than ``g_small``
   clusters (default 10, the dusting limit ``G_MAX``): single stray clusters
   and dust are not body.
@@ -55,7 +55,8 @@ import numpy as np
 
 from .. import units
 from ..errors import InputError
-from .fragments import G_MAX, fragments
+from .fragment_spectra import G_MAX
+from .fragments import fragments
 
 __all__ = ["ejecta_frame", "separation_depths", "mode_amplitude", "EjectaRecorder", "spectrum_table", "G_TIP", "MARGIN",
            "FS_LAYER", "BREAKOUT_FRACTION", "fit_rate"]
@@ -154,7 +155,7 @@ def ejecta_frame(atoms, *, axis, r0, b=None, exclude=None, u_drive=None, wavelen
         (amu / Angstrom^2), ``ejected_mass``, ``eta``, ``eta_pv``,
         ``n_layers``, ``n_dust``, ``dust_mass``, ``n_fragments``, ``g_tip_fragment``, ``top_layer``
         (the free surface's fragment, -1 if none is full-width),
-        plus ``frag`` (the :class:`~clusterdyn.analysis.fragments.Fragments`),
+        plus ``frag`` (the :class:`~clusterdyn.analysis.fragment_spectra.Fragments`),
         ``body`` (N,) bool and ``heights`` (n_bins,).
     """
     ax = int(axis)

@@ -1,11 +1,11 @@
 """Binned profiles over a whole trajectory, as arrays ready to plot or write.
 
-:class:`TrajectoryProfiles` (an analysis in MDAnalysis' AnalysisBase shape:
-``TrajectoryProfiles(traj, ...).run(start, stop, step).results``) and its
-one-call form :func:`trajectory_profiles` run
+:class:`TrajectoryProfiles` (an analysis on :class:`~clusterdyn.analysis.base.Analysis`:
+``TrajectoryProfiles(traj, ...).run(start, stop, step).results``; online
+:meth:`TrajectoryProfiles.add`, or :class:`ProfileRecorder`, its form without a
+trajectory) and its one-call form :func:`trajectory_profiles` run
 :func:`clusterdyn.analysis.slabs.stress_profile` on every frame with one
-fixed set of slabs (:class:`ProfileRecorder`, also usable as an observer
-during a run), and stack the results: ``stress[f, b, c]`` is component c
+fixed set of slabs, and stack the results: ``stress[f, b, c]`` is component c
 (Voigt xx yy zz yz xz xy, lab frame) of slab b in frame f.  From an H5MD file
 they need nothing but the path: the calculator (and so the virials) is
 rebuilt from the file's metadata.  :func:`write_profiles_csv` writes one
@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import units
 from ..errors import InputError
-from .base import TrajectoryAnalysis
+from .base import Analysis
 from .slabs import stress_profile
 from .stress import VOIGT_NAMES, particle_virials
 
@@ -42,74 +42,27 @@ def _frame_virials(atoms, virials, calc):
                      "calculator `calc`, or a function atoms -> (N, 6) virials")
 
 
-class ProfileRecorder:
-    """Collect slab profiles frame by frame on one fixed set of slabs.
+class TrajectoryProfiles(Analysis):
+    """Stress, intensity, density and velocity profiles on one fixed set of slabs, frame by frame.
 
-    ``add(atoms, virials, time)`` profiles one frame
-    (:func:`~clusterdyn.analysis.slabs.stress_profile`); :meth:`arrays`
-    stacks them into the dict :func:`trajectory_profiles` returns.  Use it
-    from a dynamics observer when the run is not stored.
-    """
+    The one slab-profile recorder, on the :class:`~clusterdyn.analysis.base.Analysis` base:
 
-    KEYS = ("stress", "von_mises", "pressure", "density", "velocity", "count")
-
-    def __init__(self, width, axis=0, lo=None, hi=None):
-        self.width, self.axis, self.lo, self.hi = width, axis, lo, hi
-        self.edges = None
-        self.frames = {k: [] for k in self.KEYS}
-        self.t = []
-
-    def add(self, atoms, virials, time, exclude=None):
-        if self.edges is None:
-            x = atoms.positions[:, self.axis]
-            span = x.max() - x.min()
-            a = x.min() - 0.2 * span if self.lo is None else self.lo
-            b = x.max() + 0.2 * span if self.hi is None else self.hi
-            nb = max(1, int(np.ceil((b - a) / self.width)))
-            self.edges = a + self.width * np.arange(nb + 1)
-        p = stress_profile(atoms, self.width, virials, axis=self.axis, lo=self.edges[0],
-                           hi=self.edges[-1], exclude=exclude)
-        for k in self.KEYS:
-            self.frames[k].append(p[k])
-        self.t.append(float(time))
-        return p
-
-    def get_state(self):
-        """Everything needed to resume (for checkpoints)."""
-        return {"width": self.width, "axis": self.axis, "lo": self.lo, "hi": self.hi, "edges": self.edges,
-                "frames": {k: list(v) for k, v in self.frames.items()}, "t": list(self.t)}
-
-    def set_state(self, st):
-        """Resume from :meth:`get_state` (in place)."""
-        self.width, self.axis, self.lo, self.hi = st["width"], int(st["axis"]), st["lo"], st["hi"]
-        self.edges = None if st["edges"] is None else np.asarray(st["edges"], float)
-        self.frames = {k: [np.asarray(x) for x in st["frames"][k]] for k in self.KEYS}
-        self.t = [float(x) for x in st["t"]]
-
-    def arrays(self):
-        if self.edges is None:
-            raise InputError("trajectory", "no frames", "at least one frame")
-        res = {k: np.array(v) for k, v in self.frames.items()}
-        res["t"] = np.asarray(self.t, float)
-        res["edges"] = self.edges
-        res["x"] = 0.5 * (self.edges[1:] + self.edges[:-1])
-        return res
-
-
-class TrajectoryProfiles(TrajectoryAnalysis):
-    """Stress, intensity, density and velocity profiles for every frame of a trajectory.
-
-    ``TrajectoryProfiles(trajectory, ...).run(start, stop, step)`` fills
-    ``results`` with the arrays listed under Returns of
-    :func:`trajectory_profiles`.
+    * offline, ``TrajectoryProfiles(trajectory, ...).run(start, stop, step)``
+      fills ``results`` with the arrays listed under Returns of
+      :func:`trajectory_profiles`;
+    * online, :meth:`add` profiles one configuration with the virials the
+      run already has (:class:`ProfileRecorder` is this class without a
+      trajectory), :meth:`arrays` stacks the frames, :meth:`get_state` /
+      :meth:`set_state` carry them through checkpoints; ``attach(dyn)`` also
+      works (virials then as for a frame, below).
 
     Parameters
     ----------
-    trajectory : path, H5MDReader, or sequence/iterable of ase.Atoms
+    trajectory : path, H5MDReader, sequence/iterable of ase.Atoms, or None
         Frames (all with a 3-D cell; its cross-section is the slab area).  An
         H5MD file written by clusterdyn needs nothing else: the calculator
         comes from its metadata (:meth:`clusterdyn.io.H5MDReader.calculator`).
-        Other paths are read with ``ase.io``.
+        Other paths are read with ``ase.io``.  None: online use only.
     width : float, optional
         Slab width, Angstrom.  Default (H5MD files only): ``sqrt(2) r0`` of
         the largest r0 of the material table, the fcc cube edge (two lattice
@@ -140,7 +93,9 @@ class TrajectoryProfiles(TrajectoryAnalysis):
         line naming the missing ``/parameters`` entries).
     """
 
-    def __init__(self, trajectory, width=None, axis=0, lo=None, hi=None, virials=None, calc=None,
+    KEYS = ("stress", "von_mises", "pressure", "density", "velocity", "count")
+
+    def __init__(self, trajectory=None, width=None, axis=0, lo=None, hi=None, virials=None, calc=None,
                  times=None, exclude=None):
         super().__init__(trajectory)
         if axis not in (0, 1, 2):
@@ -151,7 +106,55 @@ class TrajectoryProfiles(TrajectoryAnalysis):
             raise InputError("exclude", exclude, "a callable, a bool mask or 'drives'")
         self.width, self.axis, self.lo, self.hi = width, axis, lo, hi
         self.virials, self.calc, self.times, self.exclude = virials, calc, times, exclude
+        self._clear(width)
 
+    def _clear(self, width):
+        """Start a new set of frames on slabs of ``width`` (the slabs are fixed by the first frame)."""
+        self._w = width
+        self.edges = None
+        self._prof = {k: [] for k in self.KEYS}
+        self._t = []
+
+    # -- one frame, online ----------------------------------------------------------------
+    def add(self, atoms, virials, time, exclude=None):
+        """Profile one configuration with its ``virials`` ((N, 6) eV) at ``time``; returns the profile."""
+        if self.edges is None:
+            x = atoms.positions[:, self.axis]
+            span = x.max() - x.min()
+            a = x.min() - 0.2 * span if self.lo is None else self.lo
+            b = x.max() + 0.2 * span if self.hi is None else self.hi
+            nb = max(1, int(np.ceil((b - a) / self._w)))
+            self.edges = a + self._w * np.arange(nb + 1)
+        p = stress_profile(atoms, self._w, virials, axis=self.axis, lo=self.edges[0],
+                           hi=self.edges[-1], exclude=exclude)
+        for k in self.KEYS:
+            self._prof[k].append(p[k])
+        self._t.append(float(time))
+        return p
+
+    def get_state(self):
+        """Everything needed to resume (for checkpoints)."""
+        return {"width": self._w, "axis": self.axis, "lo": self.lo, "hi": self.hi, "edges": self.edges,
+                "frames": {k: list(v) for k, v in self._prof.items()}, "t": list(self._t)}
+
+    def set_state(self, st):
+        """Resume from :meth:`get_state` (in place)."""
+        self._w, self.axis, self.lo, self.hi = st["width"], int(st["axis"]), st["lo"], st["hi"]
+        self.edges = None if st["edges"] is None else np.asarray(st["edges"], float)
+        self._prof = {k: [np.asarray(x) for x in st["frames"][k]] for k in self.KEYS}
+        self._t = [float(x) for x in st["t"]]
+
+    def arrays(self):
+        """The frames so far, stacked: ``t``, ``edges``, ``x`` and the profiles (see :func:`trajectory_profiles`)."""
+        if self.edges is None:
+            raise InputError("trajectory", "no frames", "at least one frame")
+        res = {k: np.array(v) for k, v in self._prof.items()}
+        res["t"] = np.asarray(self._t, float)
+        res["edges"] = self.edges
+        res["x"] = 0.5 * (self.edges[1:] + self.edges[:-1])
+        return res
+
+    # -- the Analysis protocol -------------------------------------------------------------
     def _prepare(self):
         reader = self.reader
         width, calc = self.width, self.calc
@@ -171,7 +174,7 @@ class TrajectoryProfiles(TrajectoryAnalysis):
             raise InputError("exclude", "drives", "a callable or a bool mask (\"drives\" needs an "
                              "H5MD file with its constraints)")
         self._calc = calc
-        self._rec = ProfileRecorder(width, self.axis, self.lo, self.hi)
+        self._clear(width)
         self._n = 0
 
     def _single_frame(self, atoms):
@@ -182,13 +185,21 @@ class TrajectoryProfiles(TrajectoryAnalysis):
             ex = ex(atoms)
         t = self.times[self._n] if self.times is not None else \
             atoms.info.get("time", float(self._frame_index))
-        self._rec.add(atoms, _frame_virials(atoms, self.virials, self._calc), t, exclude=ex)
+        self.add(atoms, _frame_virials(atoms, self.virials, self._calc), t, exclude=ex)
         self._n += 1
 
     def _conclude(self):
-        self.results.update(self._rec.arrays())
+        self.results.update(self.arrays())
         self.results["frames"] = np.asarray(self.frames, dtype=np.int64)
-        self.results["width"] = self._rec.width
+        self.results["width"] = self._w
+
+
+class ProfileRecorder(TrajectoryProfiles):
+    """:class:`TrajectoryProfiles` without a trajectory: ``ProfileRecorder(width, axis, lo, hi)``, then
+    :meth:`~TrajectoryProfiles.add` per frame from a dynamics observer when the run is not stored."""
+
+    def __init__(self, width, axis=0, lo=None, hi=None):
+        super().__init__(None, width, axis, lo, hi)
 
 
 def trajectory_profiles(trajectory, width=None, axis=0, lo=None, hi=None, virials=None, calc=None,

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import units
-from ..io.lammps import META_FILE, frame_atoms
+from ..io.lammps.export import META_FILE
+from ..io.lammps.run import frame_atoms
 from .slabs import binned_profile
 from .stress import von_mises
 

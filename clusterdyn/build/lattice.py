@@ -16,6 +16,16 @@ from ..materials import get_material
 
 SQRT2 = math.sqrt(2.0)
 
+#: longitudinal sound speed of the nearest-neighbour fcc cluster lattice along a direction, in c0
+#: (docs/theory.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
+LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
+
+
+def lattice_sound_speed(c0, direction="100"):
+    """Longitudinal sound speed c_L of the cluster lattice along ``direction`` ("100", "110" or "111"):
+    ``LATTICE_CL[direction] * c0`` (sqrt(3/2) c0 along [100]), in the units of ``c0``."""
+    return LATTICE_CL[direction] * c0
+
 #: orthogonal right-handed (x, y, z) Miller directions for the shock directions offered
 ORIENTATIONS = {
     (1, 0, 0): ((1, 0, 0), (0, 1, 0), (0, 0, 1)),

@@ -13,10 +13,12 @@
   :func:`save_run`, :func:`load_run` -- a whole run (dynamics, calculator, drives) in one.
 """
 
-from clusterdyn.io.h5md import H5MDWriter, H5MDReader, read_h5md
+from clusterdyn.io.h5md_writer import H5MDWriter
+from clusterdyn.io.h5md_reader import H5MDReader, read_h5md
 from clusterdyn.io.info import h5md_info, format_info
 from clusterdyn.io.checkpoint import write_checkpoint, read_checkpoint, save_run, load_run, read_run_extra
-from clusterdyn.io.lammps import export_lammps, run_lammps  # noqa: F401  (LAMMPS scale-out)
+from clusterdyn.io.lammps.export import export_lammps  # noqa: F401  (LAMMPS scale-out)
+from clusterdyn.io.lammps.run import run_lammps  # noqa: F401
 
 __all__ = ["H5MDWriter", "H5MDReader", "read_h5md", "h5md_info", "format_info",
            "write_checkpoint", "read_checkpoint", "save_run", "load_run", "read_run_extra"]

@@ -5,7 +5,7 @@ import os
 import numpy as np
 
 from clusterdyn import units
-from clusterdyn.io.h5md import H5MDReader
+from clusterdyn.io.h5md_reader import H5MDReader
 
 __all__ = ["h5md_info", "format_info"]
 

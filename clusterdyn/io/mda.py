@@ -25,7 +25,7 @@ residue and one segment.  Positions are the wrapped ones MDAnalysis reads
 import numpy as np
 
 from clusterdyn.errors import InputError
-from clusterdyn.io.h5md import H5MDReader
+from clusterdyn.io.h5md_reader import H5MDReader
 
 try:
     import MDAnalysis

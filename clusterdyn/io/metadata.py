@@ -1,6 +1,6 @@
 """The run's metadata in an H5MD file: what analysis needs to work from the file alone.
 
-:class:`~clusterdyn.io.h5md.H5MDWriter` stores, under H5MD's ``/parameters``
+:class:`~clusterdyn.io.h5md_writer.H5MDWriter` stores, under H5MD's ``/parameters``
 group, JSON text datasets (numbers in ASE units: Angstrom, eV, amu, ASE time)::
 
     /parameters                +clusterdyn_metadata 1 (layout version)

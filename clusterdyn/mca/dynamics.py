@@ -42,7 +42,8 @@ import numpy as np
 from ase.md.md import MolecularDynamics
 
 from ..errors import InputError, InstabilityError
-from ..md.drives import Drive, Traction, _Layer
+from ..md.drives import Drive, _Layer
+from ..md.layer_drives import Traction
 from ..neighbors import NeighborList
 from . import kernels as K
 from .response import brittle, degrading, healing, plastic, plastic_degrading

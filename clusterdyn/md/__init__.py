@@ -1,7 +1,10 @@
 """Dynamics (ASE MolecularDynamics subclasses) and the drive and wall family."""
 
 from .damped import DampedVerlet, RegionOfInterest, default_timestep, pair_stability_limit, stability_limit
-from .drives import Constant, Drive, Function, Piston, SmoothRamp, Table, Traction, Wall, from_state
+from .drives import Drive, from_state
+from .histories import Constant, Function, SmoothRamp, Table
+from .layer_drives import Piston, Traction
+from .wall import Wall
 from .pulses import flat_top
 
 __all__ = ["DampedVerlet", "RegionOfInterest", "Piston", "Wall", "Traction", "Table", "Constant", "SmoothRamp", "Function", "Drive",

@@ -7,12 +7,12 @@ then slows linearly to ``u_end`` over ``release`` and holds ``u_end``
 (default 0: the piston stops, as the rear face of a flyer plate does after
 its release wave has crossed it).  The shock then carries a plateau of
 length about ``D * flat`` followed by a release fan about ``D * release``
-long.  The history is a piecewise-linear :class:`~clusterdyn.md.drives.Table`
+long.  The history is a piecewise-linear :class:`~clusterdyn.md.histories.Table`
 (exact displacement in the piston's steps, storable in checkpoints).
 
 ``flat=None`` holds u for ever (a constant piston, with an optional rise).
 
-The same shape drives a :class:`~clusterdyn.md.drives.Traction` layer with a
+The same shape drives a :class:`~clusterdyn.md.layer_drives.Traction` layer with a
 normal stress history (a pressure boundary): there the boundary is free to
 move, so after the release it is a stress-free face, as the rear of a
 flyer or a target's far side, and tension that comes back to it is not
@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .drives import Table
+from .histories import Table
 
 __all__ = ["flat_top", "pulse_end"]
 
@@ -47,7 +47,7 @@ def flat_top(u, flat, release=0.0, *, rise=0.0, u_end=0.0):
     """U(t) of a flat-topped pulse: rise to ``u``, hold for ``flat``, release to ``u_end``.
 
     The same shape serves any history of a drive: a piston's speed, or the
-    normal stress of a :class:`~clusterdyn.md.drives.Traction` (then ``u`` and
+    normal stress of a :class:`~clusterdyn.md.layer_drives.Traction` (then ``u`` and
     ``u_end`` are stresses, eV/Angstrom^3).
 
     Parameters

@@ -4,7 +4,7 @@ import time
 
 import numpy as np
 
-from ..md.drives import Piston
+from ..md.layer_drives import Piston
 
 
 def thermal_noise(atoms, rms, seed, exclude=None):
@@ -79,6 +79,12 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
         if bar is not None:
             bar.close()
     return t_run
+
+
+def piston_thickness(r0):
+    """Thickness of a scene's piston layer: 1.5 r0 (at least two atomic planes in every orientation),
+    less 1e-6 r0 so that no plane sits on the boundary (Angstrom, as ``r0``)."""
+    return 1.5 * r0 - 1e-6 * r0
 
 
 def piston_layer(atoms, thickness, axis=0):

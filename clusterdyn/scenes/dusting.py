@@ -37,7 +37,8 @@ import numpy as np
 
 from .. import units
 from ..analysis.dusting import cross_section, dispersed, layer_counts
-from ..analysis.fragments import G_MAX, FragmentFinder
+from ..analysis.fragment_graph import FragmentFinder
+from ..analysis.fragment_spectra import G_MAX
 from ..build.lattice import SQRT2
 from ..errors import InputError
 from ..md.damped import TIMESTEP_FACTOR

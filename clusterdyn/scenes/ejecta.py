@@ -10,7 +10,7 @@ or given directly (``u``) or read from a CSV (``drive_csv``: a hydrocode's
 U(t) of a Lagrangian boundary, as the paper used).
 
 **Drive** (``drive``): ``pressure`` (the default) pushes the base layer with
-a normal stress history (:class:`~clusterdyn.md.drives.Traction`: the
+a normal stress history (:class:`~clusterdyn.md.layer_drives.Traction`: the
 target pressure for the plateau, then a linear release to zero stress); the
 layer is free to move, so after the pulse the base is a stress-free face,
 as the rear of a flyer.  ``piston`` moves the base layer with a prescribed
@@ -76,11 +76,11 @@ import numpy as np
 from .. import units
 from ..analysis.ejecta import (BREAKOUT_FRACTION, FS_LAYER, G_TIP, MARGIN, EjectaRecorder, ShockProbe,
                                spectrum_table)
-from ..analysis.fragments import G_MAX
+from ..analysis.fragment_spectra import G_MAX
 from ..analysis.shock import hugoniot_interpolant
 from ..build import fcc_packing, along_axis, parse_axis, repeat_lengths
 from ..build.bodies import crystal_rotation, plane_spacing
-from ..build.lattice import ORIENTATIONS, parse_direction
+from ..build.lattice import ORIENTATIONS, lattice_sound_speed, parse_direction
 from ..build.profiled import Grooves, RandomRoughness, Sinusoid, profiled_sample
 from ..calculators import ClusterDynamics
 from ..errors import InputError
@@ -89,7 +89,7 @@ from ..md import DampedVerlet, Piston, Table, Traction
 from ..md.damped import TIMESTEP_FACTOR
 from ..md.pulses import flat_top, pulse_end
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg, piston_layer, thermal_noise
+from .common import matplotlib_agg, piston_layer, piston_thickness, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 from .pressure import cd_hugoniot, piston_speed, pressure_at
 from .shock import shock_timestep
@@ -254,7 +254,7 @@ class ProfiledShockScene(SceneDef):
             info.update(u=u, duration=None if v["flat"] is None else v["rise"] + v["flat"],
                         pulse=None if v["flat"] is None else v["rise"] + v["flat"] + v["release"])
         u = info["u"]
-        info["D_table"] = float(Du(u)) if Du is not None else math.sqrt(1.5) * mat.c0 + 1.3 * u
+        info["D_table"] = float(Du(u)) if Du is not None else lattice_sound_speed(mat.c0) + 1.3 * u
         info["P_table"] = float(Pu(u)) if Pu is not None else math.nan
         return hist, info
 
@@ -303,7 +303,7 @@ class ProfiledShockScene(SceneDef):
         calc = ClusterDynamics(rc=v["rc"])
         atoms.calc = calc
         calc.setup(atoms)
-        mask = piston_layer(atoms, 1.5 * r0 - 1e-6 * r0, ax)
+        mask = piston_layer(atoms, piston_thickness(r0), ax)
         e = np.zeros(3)
         e[ax] = 1.0
         if v["drive"] == "pressure":

@@ -6,7 +6,7 @@ scene itself builds (:meth:`~clusterdyn.scenes.lifecycle.SceneDef.setup` of
 each stage: sample, calculator, drives, dynamics), so the physics settings
 reach it through the Atoms, the calculator (materials, r0, rc, set-up
 bonds), the drives and the dynamics (time step, damping) that
-:func:`clusterdyn.io.lammps.export_lammps` writes or refuses; the run length
+:func:`clusterdyn.io.lammps.export.export_lammps` writes or refuses; the run length
 is the stage's steps and ``frames`` the number of dumped frames.
 
 What a deck cannot carry are the run controls of clusterdyn's own run
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.lammps import check_deck, export_lammps
+from ..io.lammps.export import check_deck, export_lammps
 from .base import get_scene
 from .lifecycle import check_out
 
@@ -86,7 +86,7 @@ def export_scene(scene_name, overrides, out_dir, **kw):
     stage); the deck runs each stage's full number of steps and dumps
     ``frames`` frames (for the shock the front analysis
     :func:`clusterdyn.analysis.shock.shock_from_lammps` reads them).
-    ``kw``: passed to :func:`~clusterdyn.io.lammps.export_lammps` (``nsteps``,
+    ``kw``: passed to :func:`~clusterdyn.io.lammps.export.export_lammps` (``nsteps``,
     ``frames``, ``n_points`` override the scene's).  Refusals (InputError) come
     before any file is written.
 

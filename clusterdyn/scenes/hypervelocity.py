@@ -54,7 +54,8 @@ from scipy.spatial.transform import Rotation
 
 from .. import units
 from ..analysis.ejecta import fit_rate
-from ..analysis.fragments import fragments, largest_piece, plot_spectrum
+from ..analysis.fragment_spectra import largest_piece, plot_spectrum
+from ..analysis.fragments import fragments
 from ..analysis.impact import cone_half_angle, plate_hole
 from ..build import parse_axis
 from ..build.bodies import combine_bodies, place, plate, sphere

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import units
 from ..analysis.impact import projected_density
-from ..md.drives import Wall
+from ..md.wall import Wall
 from .base import Param, Quantity
 from .common import matplotlib_agg
 

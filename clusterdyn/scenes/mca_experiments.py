@@ -29,7 +29,8 @@ from ..build.mca import mca_packing
 from ..errors import InputError
 from ..mca.calculator import MCA
 from ..mca.dynamics import MCADynamics, wave_speeds
-from ..md.drives import Function, Piston, SmoothRamp
+from ..md.histories import Function, SmoothRamp
+from ..md.layer_drives import Piston
 from .common import run_frames
 
 

@@ -34,7 +34,8 @@ from ..errors import InputError
 from ..materials import get_material
 from ..mca.contact import SegmentContact, stack_blocks
 from ..mca.dynamics import MCADynamics
-from ..md.drives import Piston, Table, Traction
+from ..md.histories import Table
+from ..md.layer_drives import Piston, Traction
 from .base import Param, Quantity, register_scene
 from .lifecycle import SceneDef, Stage, scene_params
 

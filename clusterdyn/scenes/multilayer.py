@@ -44,7 +44,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .. import units
-from ..analysis.fragments import fragments, largest_piece
+from ..analysis.fragment_spectra import largest_piece
+from ..analysis.fragments import fragments
 from ..analysis.impact import plate_hole
 from ..build import parse_axis
 from ..build.bodies import combine_bodies, place, plate_stack, sphere

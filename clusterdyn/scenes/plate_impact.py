@@ -32,14 +32,14 @@ from .. import units
 from ..analysis.profiles import ProfileRecorder, write_profiles_csv
 from ..analysis.stress import particle_virials
 from ..build import Plate, fcc_packing, polycrystal
-from ..build.lattice import SQRT2
+from ..build.lattice import SQRT2, lattice_sound_speed
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import make_piston, matplotlib_agg, thermal_noise
+from .common import make_piston, matplotlib_agg, piston_thickness, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 from ..analysis.shock import ShockTracker
 from .shock import ShockSetup, shock_info, shock_quantities, shock_stage, shock_summary
@@ -235,7 +235,7 @@ def impact_duration(info, duration=None):
     """Run time: ``duration`` or the time the waves need to cross the target and the flyer's release."""
     if duration is not None:
         return duration
-    cL = math.sqrt(1.5) * info["c0"]              # [100] longitudinal speed of the lattice
+    cL = lattice_sound_speed(info["c0"])              # [100] longitudinal speed of the lattice
     slow = 1.0 if info["sample"] == "single" else 1.6      # waves in a porous polycrystal are slower
     return slow * (info["target"] + 3.0 * info["flyer"]) / cL
 
@@ -332,7 +332,7 @@ def analyse_impact(setup, run):
     ft, fv = run["fsv_t"], run["fsv_v"]
     arrive = np.nonzero(fv > 0.1 * v)[0]
     fsv_plateau = pullback = t_arrival = fsv_min = np.nan
-    cL = math.sqrt(1.5) * setup["c0"]
+    cL = lattice_sound_speed(setup["c0"])
     tau = 2.0 * setup["flyer"] / cL
     if len(arrive):
         t_arrival = ft[arrive[0]]
@@ -471,7 +471,7 @@ PARAMS = [
 
 def _profile_times(text, setup):
     if str(text).strip().lower() == "auto":
-        cL = math.sqrt(1.5) * setup["c0"]
+        cL = lattice_sound_speed(setup["c0"])
         transit = setup["target"] / cL
         return [f * transit for f in (0.2, 0.4, 0.6, 0.8, 1.0)]
     try:
@@ -628,7 +628,7 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 2 * r0
     calc.setup(atoms)
     pot = calc.potentials[0]
-    mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u)
+    mask, piston = make_piston(atoms, piston_thickness(r0), u)
     thermal_noise(atoms, noise, seed, exclude=mask)
     atoms.set_constraint(piston)
     atoms.set_momenta(atoms.get_momenta())

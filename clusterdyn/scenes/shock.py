@@ -16,6 +16,7 @@ import numpy as np
 from .. import units
 from ..analysis.shock import ShockTracker
 from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
+from ..build.lattice import lattice_sound_speed
 from ..build.two_phase import rest_volumes, two_phase
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
@@ -23,8 +24,9 @@ from ..materials import cd_material_names, get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from ..md.drives import Piston, Table
-from .common import make_piston, matplotlib_agg, piston_layer, run_frames, thermal_noise
+from ..md.histories import Table
+from ..md.layer_drives import Piston
+from .common import make_piston, matplotlib_agg, piston_layer, piston_thickness, run_frames, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 
 #: the library materials with a cold curve (materials registered later are not in the choice list)
@@ -292,7 +294,7 @@ def _d_guess(name, u, c0):
     try:
         return hugoniot(name).D(u)
     except InputError:
-        return c0 * math.sqrt(1.5) + 1.3 * u
+        return lattice_sound_speed(c0) + 1.3 * u
 
 
 def piston_history(u_history, u):
@@ -365,9 +367,9 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size="auto", r
     pot = calc.potentials[0]
     # piston: the first 1.5 r0 (at least two atomic planes in every orientation)
     if hist is None:
-        mask, piston = make_piston(atoms, 1.5 * r0 - 1e-6 * r0, u, axis)
+        mask, piston = make_piston(atoms, piston_thickness(r0), u, axis)
     else:
-        mask = piston_layer(atoms, 1.5 * r0 - 1e-6 * r0, axis)
+        mask = piston_layer(atoms, piston_thickness(r0), axis)
         piston = Piston(mask, hist, direction=np.eye(3)[axis])
     thermal_noise(atoms, noise, seed, exclude=mask)
     atoms.set_constraint(piston)

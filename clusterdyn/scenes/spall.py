@@ -35,9 +35,10 @@ import math
 import numpy as np
 
 from .. import units
-from ..analysis.fragments import fragments, write_spectrum_csv
+from ..analysis.fragment_spectra import write_spectrum_csv
+from ..analysis.fragments import fragments
 from ..analysis.spall import LagrangianMap, pullback, ring_thickness, spall_plane, spall_strength, wave_speeds
-from ..build.lattice import SQRT2
+from ..build.lattice import SQRT2, lattice_sound_speed
 from ..errors import InputError
 from ..materials import get_material
 from .base import Param, Quantity, register_scene
@@ -81,7 +82,7 @@ def spall_duration(info, duration=None):
     """Run time: ``duration`` or the pulse's way to the rear face, its release and a few ringing periods."""
     if duration is not None:
         return duration
-    cL = math.sqrt(1.5) * info["c0"]
+    cL = lattice_sound_speed(info["c0"])
     slow = 1.0 if info["sample"] == "single" else 1.6
     return slow * (info["target"] + 6.0 * info["flyer"]) / cL
 
@@ -193,7 +194,7 @@ def analyse_spall(sm, v):
     info = sm["info"]
     mat = get_material("Al")
     c0 = info["c0"]
-    cL = math.sqrt(1.5) * c0
+    cL = lattice_sound_speed(c0)
     r0 = info["r0"]
     Lf, Lt = info["flyer"], info["target"]
     pulse = 2.0 * Lf / cL * (1.0 if info["sample"] == "single" else 1.6)

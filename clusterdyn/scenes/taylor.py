@@ -2,7 +2,7 @@
 
 A cylinder of length L0 and diameter D0 (a CD polycrystal, relaxed at rest)
 flies along ``-axis`` at V onto a fixed harmonic wall
-(:class:`~clusterdyn.md.drives.Wall`, frictionless by default, ``wall=sticking``
+(:class:`~clusterdyn.md.wall.Wall`, frictionless by default, ``wall=sticking``
 for no slip).  The run stops when the rod has stopped deforming:
 
 * its centre-of-mass velocity toward the wall is below 1% of V, or reversed
@@ -66,7 +66,7 @@ from ..errors import InputError
 from ..materials import cd_material_names, get_material
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
-from ..md.drives import Wall
+from ..md.wall import Wall
 from .base import Param, Quantity, register_scene
 from .common import matplotlib_agg, thermal_noise
 from .impact_common import IMPACT_J, announce_cost, ledger, ledger_quantities, retry_halved_dt

@@ -39,6 +39,7 @@ from .. import units
 from ..analysis.shock import (STEADY_D_HALVES, STEADY_FIT_RMS, STEADY_U_TOL, hugoniot_interpolant,
                               mixture_D)
 from ..build import fcc_packing, repeat_lengths
+from ..build.lattice import LATTICE_CL
 from ..build.two_phase import PAPER_CASES
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
@@ -67,9 +68,6 @@ class SizeParam(Param):
             return None
         return Param(self.name, (1, 1, 1), self.doc, kind="ints").parse(value)
 
-#: longitudinal sound speed of the nearest-neighbour fcc lattice along the shock direction, in c0
-#: (docs/theory.md 1.5: C11 = 2k/a along [100], rho c^2 = 5k/(2a) along [110], 8k/(3a) along [111])
-LATTICE_CL = {"100": math.sqrt(1.5), "110": math.sqrt(15.0 / 8.0), "111": math.sqrt(2.0)}
 LATTICE_MODULUS = {"100": "C11 = 3/2", "110": "15/8", "111": "2"}
 
 PARAMS = [

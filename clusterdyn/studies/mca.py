@@ -56,7 +56,7 @@ from ..analysis.stress import VOIGT
 from ..build.mca import mca_packing
 from ..mca.calculator import MCA
 from ..mca.dynamics import MCADynamics
-from ..md.drives import Piston
+from ..md.layer_drives import Piston
 from ..materials.mca import mca_material
 from .common import out_folder, parse_params
 

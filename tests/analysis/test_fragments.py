@@ -9,7 +9,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clusterdyn import units
-from clusterdyn.analysis import FragmentAnalysis, FragmentObserver, fragments
+from clusterdyn.analysis import FragmentAnalysis, FragmentObserver
+from clusterdyn.analysis.fragments import fragments
 from clusterdyn.errors import InputError
 
 R0 = 1.0          # Angstrom (the rule is scale-free; CD-sized samples below use 10 um)
@@ -157,9 +158,8 @@ def test_exclude_leaves_particles_out():
 
 
 def test_packed_images_round_trip_and_add():
-    import sys
     from numba import njit
-    F = sys.modules["clusterdyn.analysis.fragments"]
+    import clusterdyn.analysis.fragment_graph as F
 
     @njit
     def add(a, b):
@@ -265,6 +265,7 @@ def test_observer_records_counts_during_a_run_and_feeds_h5md(tmp_path):
     a.calc = ClusterDynamics(rc=1.15)
     dyn = DampedVerlet(a, J=None)
     obs = FragmentObserver(a, dyn=dyn, keep=True)
+    online = FragmentAnalysis(None, b=1.15, r0=r0).attach(dyn, interval=20)     # the same analysis, online
     path = tmp_path / "pull.h5md"
     writer = H5MDWriter(str(path), a, dyn=dyn, observables=obs.observables())
     dyn.attach(obs, interval=20)
@@ -288,6 +289,10 @@ def test_observer_records_counts_during_a_run_and_feeds_h5md(tmp_path):
     assert fa.results.steps.tolist() == rec["steps"].tolist()
     assert fa.results.fragments[-1].velocity[:, 0] == pytest.approx(
         obs.results.fragments[-1].velocity[:, 0], rel=1e-5)
+    online.conclude()
+    assert online.results.steps.tolist() == rec["steps"].tolist() == online.frames
+    assert online.results.n_fragments.tolist() == fa.results.n_fragments.tolist()
+    assert online.results.largest.tolist() == fa.results.largest.tolist()
     fa2 = FragmentAnalysis(path, b=1.15, r0=r0, keep=False).run(start=2, step=3)
     assert fa2.results.frames.tolist() == [2, 5, 8] and "fragments" not in fa2.results
 
@@ -303,3 +308,10 @@ def test_plots_and_csv(tmp_path):
     assert [float(r.split(",")[1]) for r in rows] == pytest.approx([2 / 7, 4 / 7, 1.0])
     table = f.write_csv(tmp_path / "fragments.csv").read_text().splitlines()
     assert table[0].startswith("fragment,g,mass_kg,com_x_um") and len(table) == 4
+
+
+def test_fragments_module_is_not_shadowed_by_its_function():
+    import types
+
+    import clusterdyn.analysis.fragments as F
+    assert isinstance(F, types.ModuleType) and F.fragments is fragments

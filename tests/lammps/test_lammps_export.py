@@ -10,7 +10,9 @@ from clusterdyn import units
 from clusterdyn.cli import main as cli_main
 from clusterdyn.errors import InputError
 from clusterdyn.io.lammps import (aligned_points, export_lammps, initial_bond_pairs, lammps_table_forces,
-                                  read_dump, table_grid, table_interpolation_error, _parse_log, _ranges)
+                                  read_dump, table_grid, table_interpolation_error)
+from clusterdyn.md.lammps_form import id_ranges
+from clusterdyn.io.lammps.run import _parse_log
 from clusterdyn.scenes.shock import build_shock
 
 NPTS = 2001
@@ -152,7 +154,7 @@ def test_cli_export(tmp_path):
 
 
 def test_ranges_and_parsers(tmp_path):
-    assert _ranges([5, 1, 2, 3, 7, 8]) == ["1:3", "5", "7:8"]
+    assert id_ranges([5, 1, 2, 3, 7, 8]) == ["1:3", "5", "7:8"]
     dump = tmp_path / "d.dump"
     dump.write_text("ITEM: TIMESTEP\n7\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS ss pp pp\n0 1\n0 1\n0 1\n"
                     "ITEM: ATOMS id type x y z vx vy vz fx fy fz\n2 1 1 2 3 4 5 6 7 8 9\n1 1 0 0 0 0 0 0 0 0 1\n")
@@ -359,3 +361,25 @@ def test_cli_refusals(tmp_path, capsys, args, word):
     err = capsys.readouterr().err.strip()
     assert len(err.split("\n")) == 1 and re.search(word, err), err
     assert not out.exists()
+
+
+def test_every_drive_writes_or_refuses_its_own_form(tmp_path):
+    """The exporter asks each constraint for its LAMMPS form: a drive class without one (the base's) and a
+    region of interest are refused in one line naming them, before any file."""
+    from clusterdyn.errors import InputError
+    from clusterdyn.md import DampedVerlet, Drive, RegionOfInterest
+    s = build_shock(size=(8, 3, 3), u=3 * units.km_s, J=None, seed=2)
+
+    class Pusher(Drive):
+        kind = "Pusher"
+
+    s.atoms.set_constraint([s.piston, Pusher()])
+    with pytest.raises(InputError, match=r"^atoms.constraints=.*Pusher has none"):
+        export_lammps(s.atoms, s.calc, s.dyn, tmp_path / "pusher", nsteps=10)
+    s.atoms.set_constraint(s.piston)
+    dyn = DampedVerlet(s.atoms, timestep=s.dyn.dt, J=None, region=RegionOfInterest(hi=[1e9, np.inf, np.inf]))
+    with pytest.raises(InputError, match=r"^region=.*no region of interest") as exc:
+        export_lammps(s.atoms, s.calc, dyn, tmp_path / "region", nsteps=10)
+    assert "\n" not in str(exc.value)
+    assert not (tmp_path / "pusher").exists() and not (tmp_path / "region").exists()
+    assert Drive._KINDS.pop("Pusher") is Pusher

