@@ -25,18 +25,24 @@ keys the scene marks ``restart=True`` (run length, output cadence), any
 other key is refused, and ``result.json`` records what actually ran.
 """
 
+import contextlib
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, InstabilityError
+from ..errors import InputError, InstabilityError, OutputError, check_interrupt
 
 #: checkpoint file name in the output folder
 CHECKPOINT = "checkpoint.h5"
+#: lock file in the output folder: one run writes a folder at a time
+LOCKFILE = ".clusterdyn.lock"
+#: the last checkpoint written in this process: {"path": str, "step": int}
+LAST_CHECKPOINT = {}
 
 
 @dataclass
@@ -101,6 +107,125 @@ def check_out(out):
     if not os.access(probe, os.W_OK | os.X_OK):
         raise InputError("--out", str(out), f"a folder you may write to (no write permission in {probe})")
     return p
+
+
+_HELD = {}          # real path of a locked folder -> [fd, depth]
+
+
+@contextlib.contextmanager
+def lock_out(out):
+    """Hold the output folder ``out`` for this process (created if needed) while the block runs.
+
+    An exclusive ``fcntl.flock`` on ``out/.clusterdyn.lock``: a second run (another
+    process) writing the same folder is refused in one line (InputError) before it
+    touches any file there, so the first run's files are never damaged.  Re-entrant
+    within one process (a CLI run that locked the folder, then the scene).  The lock
+    goes with the process: a killed run leaves no stale lock.
+    """
+    if out is None:
+        yield None
+        return
+    import fcntl
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    key = os.path.realpath(out)
+    if key in _HELD:
+        _HELD[key][1] += 1
+        try:
+            yield out
+        finally:
+            _HELD[key][1] -= 1
+        return
+    path = out / LOCKFILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        try:
+            who = os.pread(fd, 64, 0).decode(errors="replace").split()
+        except OSError:
+            who = []
+        os.close(fd)
+        raise InputError("--out", str(out), "a folder no other clusterdyn run is writing",
+                         hint=f"run {'pid ' + who[0] if who else 'of another process'} holds {path}; "
+                              "wait for it to end or choose another --out") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    _HELD[key] = [fd, 1]
+    try:
+        yield out
+    finally:
+        _HELD[key][1] -= 1
+        if _HELD[key][1] == 0:
+            del _HELD[key]
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+
+class _WriteWatch:
+    """Catch the write failures h5py reports only as "Exception ignored" (a chunk written when a
+    dataset is released on a full disk): they are recorded here instead of printed, and
+    :meth:`check` raises :class:`~clusterdyn.errors.OutputError` for them."""
+
+    def __init__(self):
+        self.failures = []
+        self._prev = None
+
+    def __enter__(self):
+        self._prev = sys.unraisablehook
+        sys.unraisablehook = self._hook
+        return self
+
+    def __exit__(self, *exc):
+        sys.unraisablehook = self._prev
+
+    def _hook(self, u):
+        where = f"{u.object!r} {u.err_msg or ''} {u.exc_value}"
+        if isinstance(u.exc_value, (OSError, RuntimeError)) and ("h5py" in where or "file write failed" in where):
+            self.failures.append(u.exc_value)
+            return
+        self._prev(u)
+
+    def check(self, path, kept):
+        if self.failures:
+            exc = self.failures[0]
+            self.failures.clear()
+            raise OutputError(path, exc, kept)
+
+
+#: room kept free beyond the estimated size of the next write (HDF5 metadata, allocation in blocks)
+WRITE_MARGIN = 1 << 18
+
+
+def room_for(path, need, kept=None):
+    """Raise :class:`~clusterdyn.errors.OutputError` (ENOSPC or EFBIG) unless ``need`` more bytes fit
+    in ``path`` (its file system's free space for us and the process's file-size limit), checked
+    *before* writing: HDF5 cannot always recover a file whose write failed half way, so a
+    run stops while its files are whole."""
+    import errno
+    import resource
+    path = Path(path)
+    folder = path.parent if not path.is_dir() else path
+    size = path.stat().st_size if path.is_file() else 0
+    try:
+        st = os.statvfs(folder)
+        free = st.f_bavail * st.f_frsize
+    except OSError:  # pragma: no cover - no statvfs
+        free = None
+    if free is not None and free < need + WRITE_MARGIN:
+        raise OutputError(path, OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)),
+                          (kept + "; " if kept else "") + f"{free / 2**20:.3g} MiB free, the next write needs "
+                          f"about {(need + WRITE_MARGIN) / 2**20:.3g} MiB")
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY and size + need + WRITE_MARGIN > soft:
+        raise OutputError(path, OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
+                          (kept + "; " if kept else "") + f"the file-size limit is {soft / 2**20:.3g} MiB")
+
+
+def _write_failure(exc):
+    """An exception that means a file could not be written (not bad input, not physics)."""
+    from ase.calculators.calculator import CalculationFailed
+    return isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, (CalculationFailed, InputError))
 
 
 def _same(a, b):
@@ -214,12 +339,19 @@ class SceneDef:
         return vals
 
     def run(self, overrides=None, out=None, progress=True, restart=None):
-        """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`."""
-        from ..io.checkpoint import load_run, read_run_extra
-        from .base import SceneResult
+        """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`.
+
+        Bad input, an output folder another run holds (:func:`lock_out`), a sample that
+        cannot fit in memory and a run estimated past ``max_wall`` hours are refused in one
+        line before any work.  A file that cannot be written (full disk) raises
+        :class:`~clusterdyn.errors.OutputError` naming it and what is kept: the last
+        checkpoint (replaced only once a new one is complete) and the H5MD frames written.
+        """
+        from ..io.checkpoint import read_run_extra
         t0 = time.perf_counter()
         out = check_out(out)
         resume = None
+        check_interrupt()
         if restart is not None:
             if not Path(restart).is_file():
                 raise InputError("--restart", str(restart), "an existing checkpoint file")
@@ -233,8 +365,69 @@ class SceneDef:
         else:
             v = self.parse(overrides)
         self.check(v)
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
+        self._check_memory(v)
+        with lock_out(out), _WriteWatch() as watch:
+            if out is not None:
+                self._check_writable(v, out)
+            return self._run_locked(v, out, progress, restart, resume, watch, t0)
+
+    # -- run budget: wall time and memory, estimated before any work -------------------
+    #: particle-steps per second assumed for the wall-time estimate: conservative (the CD
+    #: engine does 1-3 million on two cores; MCA scenes set their own)
+    rate = 3.0e5
+    #: bytes per particle assumed for the memory estimate (positions, momenta, forces, the
+    #: neighbour list and the analysis: a low bound, so that only a run that cannot fit is refused)
+    bytes_per_particle = 1000
+    #: estimated wall times past this (s) are announced in one line on stderr
+    wall_note_s = 3600.0
+
+    def estimate_particles(self, v):
+        """Particles the set-up will build, from the parameters alone (None: not known before set-up)."""
+        return None
+
+    def _check_memory(self, v):
+        n = self.estimate_particles(v)
+        if n is None:
+            return
+        need = float(n) * self.bytes_per_particle
+        try:
+            have = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):  # pragma: no cover - no sysconf
+            return
+        if need > have:
+            raise InputError("parameters", _sizes_text(self, v),
+                             f"a sample that fits in memory ({have / 2**30:.3g} GiB here)",
+                             hint=f"about {n:.3g} particles would need at least {need / 2**30:.3g} GiB")
+
+    def _check_wall(self, v, stage):
+        """Estimate the stage's wall time (particle-steps / :attr:`rate`) before it starts; one line
+        past :attr:`wall_note_s`, a refusal past ``max_wall`` hours."""
+        steps = max(0, int(stage.nsteps) - int(getattr(stage.dyn, "nsteps", 0)))
+        n = len(stage.atoms)
+        est = float(n) * steps / self.rate
+        limit_h = v.get("max_wall")
+        if limit_h is not None and est > limit_h * 3600.0:
+            raise InputError("max_wall", f"{limit_h:g}", f"hours >= the run's estimate, {est / 3600:.3g} h",
+                             hint=f"{n} particles x {steps:.4g} steps at <= {self.rate:.3g} particle-steps/s; "
+                                  f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
+        if est > self.wall_note_s:
+            print(f"clusterdyn: note: {self.name}: this run is estimated at {_hours(est)} "
+                  f"({n} particles x {steps:.4g} steps at <= {self.rate:.3g} particle-steps/s)", file=sys.stderr)
+
+    def _check_writable(self, v, out):
+        """Refuse an output folder holding a file this run would have to overwrite but may not."""
+        names = [CHECKPOINT, "result.json"]
+        if v.get("h5md", False):
+            names += [self._h5md_path(out, n, len(self.plan(v))).name for n in self.plan(v)]
+        for name in names:
+            f = out / name
+            if f.exists() and not os.access(f, os.W_OK):
+                raise InputError("--out", str(out), "a folder whose files clusterdyn may overwrite",
+                                 hint=f"{f} is read-only")
+
+    def _run_locked(self, v, out, progress, restart, resume, watch, t0):
+        from ..io.checkpoint import load_run
+        from .base import SceneResult
         summaries = list(resume["summaries"]) if resume else []
         names = self.plan(v)
         files = []
@@ -255,7 +448,9 @@ class SceneDef:
                     else:
                         atoms, dyn, info = self.setup(v, name)
                         stage = self.attach(v, name, atoms, dyn, info)
-                    files += self._run_stage(v, k, stage, summaries, out, progress, len(names))
+                    if attempt == 0:
+                        self._check_wall(v, stage)
+                    files += self._run_stage(v, k, stage, summaries, out, progress, len(names), watch)
                     break
                 except InstabilityError as exc:
                     attempt += 1
@@ -272,7 +467,10 @@ class SceneDef:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]
         res.wall_time_s = time.perf_counter() - t0
         if out is not None:
-            res.files.append(res.write(out))
+            try:
+                res.files.append(res.write(out))
+            except OSError as exc:
+                raise OutputError(out / "result.json", exc, "the H5MD frames and the last checkpoint") from None
         return res
 
     def display(self, vals):
@@ -283,26 +481,60 @@ class SceneDef:
         stem = self.h5md_stem or self.name.replace("-", "_")
         return out / (f"{stem}.h5md" if nstages == 1 else f"{stem}_{name}.h5md")
 
-    def _run_stage(self, v, k, stage, summaries, out, progress, nstages):
+    def _run_stage(self, v, k, stage, summaries, out, progress, nstages, watch=None):
         from ..io.checkpoint import save_run
         from .common import run_frames
+        watch = watch if watch is not None else _WriteWatch()
         dyn = stage.dyn
         for fn, interval in stage.observers:
             dyn.attach(fn, interval=interval)
         writer = None
+        path = None
         files = []
+        ckpt = (out / CHECKPOINT) if (out is not None and v.get("checkpoint_every", 0)) else None
+
+        def kept():
+            parts = []
+            if writer is not None:
+                parts.append(f"{writer.nframes} H5MD frames in {path}")
+            if ckpt is not None:
+                last = LAST_CHECKPOINT.get("path") == str(ckpt) and LAST_CHECKPOINT.get("step")
+                parts.append(f"the checkpoint {ckpt} at step {last} (continue with --restart {ckpt})"
+                             if last is not False and last is not None else "no checkpoint written yet")
+            return "; ".join(parts) or None
+
         if out is not None and v.get("h5md", False):
             from ..io import H5MDWriter
             path = self._h5md_path(out, stage.name, nstages)
             kw = dict(dyn=dyn, parameters=self.display(v), observables=stage.observables or {},
                       per_particle=stage.per_particle or {})
-            if dyn.nsteps > 0 and path.exists():
-                writer = H5MDWriter(str(path), stage.atoms, mode="a", restart_step=dyn.nsteps, **kw)
-            else:
-                writer = H5MDWriter(str(path), stage.atoms, **kw)
-            dyn.attach(writer, interval=max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))))
+            try:
+                if dyn.nsteps > 0 and path.exists():
+                    writer = H5MDWriter(str(path), stage.atoms, mode="a", restart_step=dyn.nsteps, **kw)
+                else:
+                    writer = H5MDWriter(str(path), stage.atoms, **kw)
+                watch.check(path, kept())
+            except Exception as exc:
+                if not _write_failure(exc):
+                    raise
+                raise OutputError(path, exc, kept()) from None
+
+            grow = [0]
+
+            def write_frame():
+                before = path.stat().st_size
+                room_for(path, max(2 * grow[0], 128 * len(stage.atoms)), kept())
+                try:
+                    writer.write()
+                    watch.check(path, None)
+                    grow[0] = max(grow[0], path.stat().st_size - before)
+                except Exception as exc:
+                    if not _write_failure(exc):
+                        raise
+                    raise OutputError(path, exc, kept()) from None
+
+            dyn.attach(write_frame, interval=max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))))
             files.append(path)
-        ckpt = (out / CHECKPOINT) if (out is not None and v.get("checkpoint_every", 0)) else None
 
         def extra():
             return {"scene": self.name, "params": {kk: _plain(x) for kk, x in v.items()},
@@ -310,20 +542,61 @@ class SceneDef:
                     "stage": {"name": stage.name, "info": stage.info, "t_run": stage.t_run,
                               "analysis": stage.analysis.get_state() if stage.analysis is not None else {}}}
 
+        def save(p):
+            last = Path(p).stat().st_size if Path(p).is_file() else 0
+            room_for(Path(p).parent / (Path(p).name + ".new"), max(last + last // 4, 600 * len(stage.atoms)), kept())
+            try:
+                save_run(p, dyn, extra())
+                watch.check(p, None)
+            except Exception as exc:
+                if not _write_failure(exc):
+                    raise
+                raise OutputError(p, exc, kept()) from None
+            LAST_CHECKPOINT.update(path=str(p), step=int(dyn.nsteps))
+
         def on_frame(d):
+            check_interrupt()
             if stage.on_frame is not None:
                 stage.on_frame(d)
 
         desc = self.name if nstages == 1 else f"{self.name} ({stage.name})"
+        failed = False
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
-                                      save=lambda path: save_run(path, dyn, extra()), stop=stage.stop)
+                                      save=save, stop=stage.stop)
+        except OutputError:
+            failed = True
+            raise
         finally:
-            if writer is not None:
-                writer.close()
             dyn.observers.clear()
+            if writer is not None:
+                try:
+                    writer.close()
+                    watch.check(path, None)
+                except Exception as exc:
+                    watch.failures.clear()
+                    if not failed and _write_failure(exc):
+                        raise OutputError(path, exc, kept()) from None
+                    if not _write_failure(exc):
+                        raise
         return files
+
+
+def _hours(seconds):
+    if seconds < 3600:
+        return f"{seconds / 60:.3g} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.3g} h"
+    if seconds < 3 * 365 * 86400:
+        return f"{seconds / 86400:.3g} days"
+    return f"{seconds / (365 * 86400):.3g} years"
+
+
+def _sizes_text(scene, v):
+    """The size-setting parameters of a run as the user would write them (for a memory refusal)."""
+    sizes = [p for p in scene.params if p.unit in ("A", "Ang", "nm", "um", "mm", "m", "cm") or p.kind == "ints"]
+    return " ".join(f"{p.name}={_display(p, v[p.name])}" for p in sizes if v.get(p.name) is not None)
 
 
 def _display(p, value):
@@ -351,6 +624,8 @@ def scene_params(params, *, frames=None, h5md_frames=20, checkpoint_every=10):
               restart=True),
         Param("checkpoint_every", checkpoint_every, "analysis frames between checkpoints (with --out; "
               "0 = none)", kind="int", low=0, restart=True),
+        Param("max_wall", 24.0, "hours: a run estimated to take longer (particle-steps at a conservative "
+              "rate) is refused before it starts", low=0.0, low_open=True, restart=True),
     ]
     own = {p.name for p in params}
     return list(params) + [p for p in common if p.name not in own]
