@@ -159,6 +159,10 @@ class DustingScene(SceneDef):
                    "mass fraction against time, clusters per layer (CD paper figs. 18-20)")
     params = scene_params(PARAMS, h5md_frames=20)
 
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        return fcc_count(v["length"] * (v["periods"] * SQRT2 * v["r0"]) ** 2, v["r0"])
+
     def check(self, v):
         n = _cells(v)
         if n < MIN_CELLS:

@@ -215,8 +215,9 @@ class ProfiledShockScene(SceneDef):
         Du = hugoniot_interpolant(hug["u"], hug["D"]) if hug is not None and len(hug["u"]) >= 2 else None
         Pu = (lambda x: pressure_at(x, hug)) if hug is not None and len(hug["u"]) >= 2 else None
         if v["drive_csv"] is not None:
-            hist = Table.read_csv(v["drive_csv"])
-            stress = hist.values.ndim == 1 and _csv_is_stress(v["drive_csv"])
+            from .lifecycle import read_history_csv
+            hist, kind = read_history_csv("drive_csv", v["drive_csv"], kinds=("u", "sigma"))
+            stress = hist.values.ndim == 1 and kind == "sigma"
             if hist.values.ndim != 1:
                 raise InputError("drive_csv", v["drive_csv"], "a CSV of one u_<unit> or sigma_<unit> column")
             if stress != (v["drive"] == "pressure"):
@@ -259,6 +260,13 @@ class ProfiledShockScene(SceneDef):
         return hist, info
 
     # -- lifecycle hooks -----------------------------------------------------------------
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        prof, A, lam, width, r0, depth = self.geometry(v)
+        if depth is None:
+            return None
+        return fcc_count(width * (depth + A) * v["slab_cells"] * repeat_lengths(_dir_key(v), r0)[2], r0)
+
     def check(self, v):
         mat = get_material(v["material"])
         if mat.curve is None:

@@ -238,6 +238,10 @@ class HypervelocityScene(SceneDef):
                    "cloud, fragments, radiographs vs the CD paper's Table 2")
     params = scene_params(PARAMS, h5md_frames=12, checkpoint_every=10)
 
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        return fcc_count(math.pi * v["radius"] ** 2 * v["thickness"] + math.pi / 6 * v["diameter"] ** 3, v["r0"])
+
     def check(self, v):
         if v["thickness"] < v["r0"]:
             raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the plate thickness "

@@ -375,6 +375,8 @@ class SceneDef:
     #: particle-steps per second assumed for the wall-time estimate: conservative (the CD
     #: engine does 1-3 million on two cores; MCA scenes set their own)
     rate = 3.0e5
+    #: the same for MCA dynamics (pairs with state: about ten times the work per particle)
+    rate_mca = 3.0e4
     #: bytes per particle assumed for the memory estimate (positions, momenta, forces, the
     #: neighbour list and the analysis: a low bound, so that only a run that cannot fit is refused)
     bytes_per_particle = 1000
@@ -404,15 +406,17 @@ class SceneDef:
         past :attr:`wall_note_s`, a refusal past ``max_wall`` hours."""
         steps = max(0, int(stage.nsteps) - int(getattr(stage.dyn, "nsteps", 0)))
         n = len(stage.atoms)
-        est = float(n) * steps / self.rate
+        rate = self.rate_mca if type(stage.dyn).__name__ == "MCADynamics" else self.rate
+        est = float(n) * steps / rate
         limit_h = v.get("max_wall")
         if limit_h is not None and est > limit_h * 3600.0:
             raise InputError("max_wall", f"{limit_h:g}", f"hours >= the run's estimate, {est / 3600:.3g} h",
-                             hint=f"{n} particles x {steps:.4g} steps at <= {self.rate:.3g} particle-steps/s; "
+                             hint=f"{n} particles x {steps:.4g} steps at <= {rate:.3g} particle-steps/s; "
                                   f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
         if est > self.wall_note_s:
-            print(f"clusterdyn: note: {self.name}: this run is estimated at {_hours(est)} "
-                  f"({n} particles x {steps:.4g} steps at <= {self.rate:.3g} particle-steps/s)", file=sys.stderr)
+            upto = "up to " if stage.stop is not None else ""
+            print(f"clusterdyn: note: {self.name}: this run is estimated at {upto}{_hours(est)} "
+                  f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
 
     def _check_writable(self, v, out):
         """Refuse an output folder holding a file this run would have to overwrite but may not."""
@@ -446,7 +450,11 @@ class SceneDef:
                         stage.t_run = float(st.get("t_run", 0.0))
                         resume = None
                     else:
-                        atoms, dyn, info = self.setup(v, name)
+                        try:
+                            atoms, dyn, info = self.setup(v, name)
+                        except MemoryError as exc:
+                            raise InputError("parameters", _sizes_text(self, v), "a sample that fits in memory",
+                                             hint=str(exc)) from None
                         stage = self.attach(v, name, atoms, dyn, info)
                     if attempt == 0:
                         self._check_wall(v, stage)
@@ -581,6 +589,57 @@ class SceneDef:
                     if not _write_failure(exc):
                         raise
         return files
+
+
+def read_history_csv(name, path, kinds=("u",), signed=False):
+    """A drive history read from the CSV ``path`` given as parameter ``name``, checked before any work.
+
+    ``kinds`` are the value columns allowed: ``"u"`` (speed, u_<unit>), ``"sigma"``
+    (stress, sigma_<unit>).  Refused in one line naming ``name`` and the path as written:
+    a file that is not UTF-8 text, a header or rows the table reader refuses, a column of
+    another kind (a stress read as a speed), times that decrease or start after 0, and
+    (unless ``signed``) negative values.  Returns ``(Table, kind)``.
+    """
+    from ..md.drives import Table
+    text = str(path)
+    if not os.path.isfile(text):
+        raise InputError(name, text, "an existing CSV file")
+    try:
+        with open(text, encoding="utf-8") as fh:
+            head = fh.read()
+    except UnicodeDecodeError:
+        raise InputError(name, text, "a text CSV file (this file is not UTF-8 text)") from None
+    except OSError as exc:
+        raise InputError(name, text, f"a CSV file you may read ({exc.strerror})") from None
+    header = next((ln for ln in head.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    cols = [h.strip() for h in header.split(",")]
+    kind = "sigma" if any(c.startswith("sigma_") for c in cols) else "u"
+    want = " or ".join({"u": "a speed column u_<unit> (u_km_s, u_m_s, ...)",
+                        "sigma": "a stress column sigma_<unit> (sigma_GPa, ...)"}[k] for k in kinds)
+    if kind not in kinds:
+        raise InputError(name, text, f"a CSV with a time column and {want}",
+                         hint=f"its columns are {','.join(cols)}")
+    try:
+        hist = Table.read_csv(text)
+    except InputError as exc:
+        raise InputError(name, text, f"a CSV with a time column and {want}",
+                         hint=f"{exc.allowed}; its columns are {','.join(cols)}" if exc.argument == "columns"
+                         else str(exc.allowed)) from None
+    t = np.asarray(hist.times, float)
+    vals = np.asarray(hist.values, float)
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(vals))):
+        raise InputError(name, text, "a CSV of finite numbers")
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        raise InputError(name, text, "times that never decrease")
+    if not signed and np.any(vals < 0):
+        raise InputError(name, text, "values >= 0 (the drive pushes; a negative speed or stress pulls the "
+                         "sample apart)")
+    return hist, kind
+
+
+def fcc_count(volume, r0):
+    """Clusters of size ``r0`` in ``volume`` packed fcc (nearest neighbours r0 apart): sqrt(2) V / r0^3."""
+    return math.sqrt(2.0) * float(volume) / float(r0) ** 3
 
 
 def _hours(seconds):

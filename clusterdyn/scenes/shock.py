@@ -304,11 +304,8 @@ def piston_history(u_history, u):
     if isinstance(u_history, Table):
         hist = u_history
     else:
-        try:
-            hist = Table.read_csv(u_history)
-        except InputError as exc:
-            raise InputError("u_history", u_history, f"a U(t) CSV file: {exc.allowed}",
-                             hint=f"{exc.argument}={exc.value!r}") from None
+        from .lifecycle import read_history_csv
+        hist, _ = read_history_csv("u_history", u_history, kinds=("u",))
     top = hist.max_abs()
     if top > u * (1 + 1e-12):
         raise InputError("u_history", str(u_history), f"a history no faster than u = {u / units.km_s:g} km/s "

@@ -184,6 +184,8 @@ def build_taylor(v):
         calc = ClusterDynamics(rc=rc)
     atoms.calc = calc
     relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
+    if relax is None:
+        atoms.get_forces()            # relax_cycles=0: the calculator's set-up (its potentials) all the same
     atoms.set_momenta(np.zeros((len(atoms), 3)))
     pot = calc.potentials[0]
     # the relaxed rod at rest: its length and the outline's calibration offset

@@ -85,6 +85,12 @@ def parse_params(params, overrides, forward=None, study="study"):
             raise InputError("--set", k, f"a parameter of study '{study}': " + ", ".join(allowed))
     if forward is not None:
         forward.parse(fwd)          # fail early on a bad forwarded value
+    if vals.get("cache") is not None:
+        from ..scenes.lifecycle import check_out
+        try:
+            check_out(vals["cache"])
+        except InputError as exc:
+            raise InputError("cache", vals["cache"], exc.allowed) from None
     return vals, fwd
 
 
