@@ -169,6 +169,9 @@ class DustingScene(SceneDef):
             raise InputError("length", f"{v['length'] / units.mm:g}mm",
                              f"at least {MIN_CELLS} repeat cells (sqrt 2 r0 = {SQRT2 * v['r0'] / units.um:g} um "
                              f"each): {MIN_CELLS * SQRT2 * v['r0'] / units.mm:.3g} mm or more")
+        if v["probe"] > n * SQRT2 / 2:
+            raise InputError("probe", f"{v['probe']:g}", f"a depth in [0.5, {n * SQRT2 / 2:.4g}] r0 (half the "
+                             f"sample's length: the probe must stay near the rear face)")
         if v["periods"] * SQRT2 < 2.0 * v["rc"]:
             raise InputError("periods", v["periods"], f"a cross-section at least 2 rc r0 wide "
                              f"({math.ceil(2 * v['rc'] / SQRT2)} periods at rc = {v['rc']:g})")

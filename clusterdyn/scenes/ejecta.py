@@ -283,6 +283,12 @@ class ProfiledShockScene(SceneDef):
             raise InputError("u", v["u"] / units.km_s, "none with drive=pressure (the stress is 'pressure')")
         if v["u_end"] > (v["u"] if v["u"] is not None else math.inf):
             raise InputError("u_end", v["u_end"] / units.km_s, "a speed <= u")
+        if v.get("spectrum_time") is not None and v["spectrum_time"] > v["t_end"] * (1 + 1e-9):
+            raise InputError("spectrum_time", f"{v['spectrum_time'] / units.us:g}us",
+                             f"none or a time within the run, 0-{v['t_end'] / units.us:g} us (t_end)")
+        if depth is not None and depth < A + 10 * r0:
+            raise InputError("depth", f"{depth / units.um:g}um", f">= the profile's amplitude + 10 r0 = "
+                             f"{(A + 10 * r0) / units.um:g} um")
         if lam is not None and lam < 4 * r0:
             raise InputError("r0", r0 / units.um, f"<= wavelength/4 = {lam / 4 / units.um:g} um (the profile "
                              "needs a few clusters per wavelength)")

@@ -257,7 +257,10 @@ class HypervelocityScene(SceneDef):
                 raise InputError("keep_within", f"{v['keep_within'] / units.mm:g}mm", f"at least "
                                  f"{need / units.mm:g} mm (the plate radius or the sphere's start, plus 2 r0: "
                                  "the region must hold the set-up)")
-        parse_times(v["image_times"], "image_times", [])
+        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
+        if late:
+            raise InputError("image_times", v["image_times"], f"auto or times within the run, 0-"
+                             f"{v['t_end'] / units.us:g} us (t_end)")
 
     def setup(self, v, stage):
         return build_hypervelocity(v)

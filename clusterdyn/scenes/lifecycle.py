@@ -306,11 +306,21 @@ class SceneDef:
         """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
         known = {p.name: p for p in self.params}
         vals = self.defaults()
+        self._given = {k: str(x) for k, x in (overrides or {}).items()}
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
             vals[k] = known[k].parse(x)
         return vals
+
+    def given(self, p, value):
+        """A parameter's value as the user wrote it (for a refusal), else in its display unit."""
+        text = getattr(self, "_given", {}).get(p.name if not isinstance(p, str) else p)
+        if text is not None:
+            return text
+        if isinstance(p, str):
+            p = {q.name: q for q in self.params}[p]
+        return _display(p, value)
 
     def restart_keys(self):
         return [p.name for p in self.params if getattr(p, "restart", False)]
@@ -326,6 +336,7 @@ class SceneDef:
             else:
                 vals[p.name] = p.parse(p.default) if p.default is not None else None
         allowed = self.restart_keys()
+        self._given = {k: str(x) for k, x in (overrides or {}).items()}
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
@@ -364,6 +375,7 @@ class SceneDef:
             resume = extra
         else:
             v = self.parse(overrides)
+        self._check_sizes(v)
         self.check(v)
         self._check_memory(v)
         with lock_out(out), _WriteWatch() as watch:
@@ -410,13 +422,38 @@ class SceneDef:
         est = float(n) * steps / rate
         limit_h = v.get("max_wall")
         if limit_h is not None and est > limit_h * 3600.0:
-            raise InputError("max_wall", f"{limit_h:g}", f"hours >= the run's estimate, {est / 3600:.3g} h",
+            raise InputError("max_wall", self.given("max_wall", limit_h), f"hours >= the run's estimate, {est / 3600:.3g} h",
                              hint=f"{n} particles x {steps:.4g} steps at <= {rate:.3g} particle-steps/s; "
                                   f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
         if est > self.wall_note_s:
             upto = "up to " if stage.stop is not None else ""
             print(f"clusterdyn: note: {self.name}: this run is estimated at {upto}{_hours(est)} "
                   f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
+
+    def _check_frames(self, v, stage):
+        """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer)."""
+        n = int(stage.nsteps)
+        for key in ("frames", "h5md_frames"):
+            want = v.get(key)
+            if want is None or (key == "frames" and want != stage.frames) or (key == "h5md_frames" and not (
+                    v.get("h5md") and stage.frames)):
+                continue
+            if int(want) > n:
+                raise InputError(key, self.given(key, want), f"at most the run's {n} steps (one frame per step)")
+
+    #: parameters that set the size of a cluster or automaton, and the range the model is checked in
+    size_params = ("r0", "d", "r0_inclusion")
+    size_range_m = (1e-8, 1.0)
+
+    def _check_sizes(self, v):
+        from .. import units
+        lo, hi = self.size_range_m
+        for p in self.params:
+            val = v.get(p.name)
+            if p.name in self.size_params and p.unit and isinstance(val, float):
+                if not lo * units.m <= val <= hi * units.m:
+                    raise InputError(p.name, self.given(p, val), f"a size in [{lo * 1e9:g} nm, {hi:g} m] (clusters "
+                                     "from 10 nm to 1 m: outside it the arithmetic in Angstrom loses the physics)")
 
     def _check_writable(self, v, out):
         """Refuse an output folder holding a file this run would have to overwrite but may not."""
@@ -457,6 +494,7 @@ class SceneDef:
                                              hint=str(exc)) from None
                         stage = self.attach(v, name, atoms, dyn, info)
                     if attempt == 0:
+                        self._check_frames(v, stage)
                         self._check_wall(v, stage)
                     files += self._run_stage(v, k, stage, summaries, out, progress, len(names), watch)
                     break
@@ -655,7 +693,7 @@ def _hours(seconds):
 def _sizes_text(scene, v):
     """The size-setting parameters of a run as the user would write them (for a memory refusal)."""
     sizes = [p for p in scene.params if p.unit in ("A", "Ang", "nm", "um", "mm", "m", "cm") or p.kind == "ints"]
-    return " ".join(f"{p.name}={_display(p, v[p.name])}" for p in sizes if v.get(p.name) is not None)
+    return " ".join(f"{p.name}={scene.given(p, v[p.name])}" for p in sizes if v.get(p.name) is not None)
 
 
 def _display(p, value):

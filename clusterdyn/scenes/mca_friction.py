@@ -227,11 +227,11 @@ class FrictionScene(SceneDef):
         mats = [get_material(v["material"]), get_material(v["material_top"])]
         strength = min((m.sigma_c if getattr(m, "sigma_c", None) else m.sigma_y) for m in mats)
         if v["stress"] >= strength:
-            raise InputError("stress", f"{v['stress'] / units.GPa:g}GPa", f"a stress below the softer block's "
+            raise InputError("stress", self.given("stress", v["stress"]), f"a stress below the softer block's "
                              f"compressive or yield strength, {strength / units.GPa:g} GPa")
         vmax = 0.01 * min(math.sqrt(m.E / m.rho0) for m in mats)
         if v["V"] > vmax:
-            raise InputError("V", f"{v['V'] / units.m_s:g}m/s", f"a speed in (0, {vmax / units.m_s:.4g}] m/s "
+            raise InputError("V", self.given("V", v["V"]), f"a speed in (0, {vmax / units.m_s:.4g}] m/s "
                              "(1% of the slower block's bar wave speed sqrt(E/rho): a quasi-static slide)")
         L, H = v["size"]
         if L < 3:

@@ -586,6 +586,11 @@ class ShockScene(SceneDef):
                                  f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
         if v["u_history"] is not None:
             piston_history(v["u_history"], v["u"])
+        if v["fit_from"] != "auto":
+            travel = 0.8 * size[0] * repeat_lengths(v["direction"], 1.0)[0]     # the run stops there (in r0)
+            if float(v["fit_from"]) >= travel:
+                raise InputError("fit_from", v["fit_from"], f"auto or a front travel below {travel:.4g} r0 (the run "
+                                 f"ends when the front has crossed 0.8 of the {text} sample)")
 
     @staticmethod
     def size(v):
