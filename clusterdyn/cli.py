@@ -65,6 +65,11 @@ def _read_config(path):
     params = data.get("params", data)
     if not isinstance(params, dict):
         raise InputError("--config", str(path), "a table of key = value parameters")
+    if "params" in data:
+        extra = [k for k in data if k not in ("scene", "params")]
+        if extra:
+            raise InputError("--config", f"{path}: {extra[0]}", "top-level keys scene and [params] only "
+                             "(parameters go in [params])")
     out = {}
     for k, v in params.items():
         if isinstance(v, dict):
@@ -96,13 +101,18 @@ def cmd_run(args):
     from .scenes import get_scene
     _threads(args)
     overrides = {}
+    scene = get_scene(args.scene)
     if args.config:
         cfg, scene_name = _read_config(args.config)
         if scene_name and scene_name != args.scene:
             raise InputError("--config", args.config, f"a config for scene '{args.scene}' (it is for '{scene_name}')")
+        known = [p.name for p in scene.params]
+        for k in cfg:
+            if k not in known:
+                raise InputError("--config", f"{args.config}: {k}", f"a parameter of scene '{scene.name}': "
+                                 + ", ".join(known))
         overrides.update(cfg)
     overrides.update(_parse_sets(args.set))
-    scene = get_scene(args.scene)
     kw = {}
     if args.restart:
         kw["restart"] = args.restart

@@ -17,6 +17,7 @@ class InputError(ValueError):
         self.argument = argument
         self.value = value
         self.allowed = allowed
+        self.hint = hint
         msg = f"{argument}={value!r} is not allowed: expected {allowed}"
         if hint:
             msg += f" ({hint})"
@@ -27,6 +28,7 @@ class InstabilityError(CalculationFailed):
     """A run left the range where the model is valid (names step, particles, quantity)."""
 
     def __init__(self, message, step=None, particles=None, quantity=None, value=None, limit=None):
+        self.message = message
         self.step = step
         self.particles = tuple(int(p) for p in particles) if particles is not None else ()
         self.quantity = quantity

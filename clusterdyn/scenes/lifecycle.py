@@ -262,6 +262,9 @@ class SceneDef:
     params = ()
     #: H5MD file name stem (default: the scene's name)
     h5md_stem = None
+    #: what a user can change from the command line after an instability (formatted with the
+    #: parameters; added to the message), e.g. the MCA scenes' ``steps``
+    instability_hint = None
 
     # -- hooks -------------------------------------------------------------------------
     def check(self, v):
@@ -375,9 +378,15 @@ class SceneDef:
             resume = extra
         else:
             v = self.parse(overrides)
-        self._check_sizes(v)
-        self.check(v)
-        self._check_memory(v)
+        try:
+            self._check_sizes(v)
+            self.check(v)
+            self._check_memory(v)
+        except InputError as exc:
+            text = getattr(self, "_given", {}).get(exc.argument)
+            if text is None or exc.value == text:
+                raise
+            raise InputError(exc.argument, text, exc.allowed, hint=getattr(exc, "hint", None)) from None
         with lock_out(out), _WriteWatch() as watch:
             if out is not None:
                 self._check_writable(v, out)
@@ -431,14 +440,21 @@ class SceneDef:
                   f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
 
     def _check_frames(self, v, stage):
-        """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer)."""
+        """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).
+
+        A default (not given) larger than a short run is lowered to the run's steps, and
+        ``result.json`` records the number used."""
         n = int(stage.nsteps)
         for key in ("frames", "h5md_frames"):
             want = v.get(key)
-            if want is None or (key == "frames" and want != stage.frames) or (key == "h5md_frames" and not (
-                    v.get("h5md") and stage.frames)):
+            if want is None or n < 1 or (key == "frames" and want != stage.frames):
                 continue
             if int(want) > n:
+                if key not in getattr(self, "_given", {}):
+                    v[key] = n
+                    if key == "frames":
+                        stage.frames = n
+                    continue
                 raise InputError(key, self.given(key, want), f"at most the run's {n} steps (one frame per step)")
 
     #: parameters that set the size of a cluster or automaton, and the range the model is checked in
@@ -502,6 +518,10 @@ class SceneDef:
                     attempt += 1
                     nv = None if restart is not None else self.retry(v, name, exc, attempt)
                     if nv is None:
+                        if self.instability_hint and getattr(exc, "message", None) is not None:
+                            raise InstabilityError(f"{exc.message}; {self.instability_hint.format(**v)}", exc.step,
+                                                   exc.particles or None, exc.quantity, exc.value,
+                                                   exc.limit) from None
                         raise
                     v = nv
             summaries.append(self.finish(v, stage))

@@ -218,6 +218,8 @@ class FrictionScene(SceneDef):
 
     name = "mca-friction"
     h5md_stem = "mca_friction"
+    instability_hint = ("on the command line the time step is fixed by d; a slower loading is more steps (the "
+                        "ramps are fractions of the run), --set steps= above {steps}")
     description = "MCA friction of two blocks: segment method (or explicit roughness), mu_dr vs time"
     params = _params()
 

@@ -321,6 +321,9 @@ class TaylorScene(SceneDef):
         if g < 3.0 * r0:
             raise InputError("grain_size", f"{g / units.mm:g}mm", f"at least 3 r0 = {3 * r0 / units.mm:.4g} mm "
                              "(the smallest grain of the polycrystal builder)")
+        if g > min(v["D0"], v["L0"]):
+            raise InputError("grain_size", f"{g / units.mm:g}mm", f"at most the rod's diameter and length, "
+                             f"{min(v['D0'], v['L0']) / units.mm:g} mm")
 
     def setup(self, v, stage):
         return build_taylor(v)
