@@ -9,21 +9,30 @@
     clusterdyn export lammps SCENE [--set ...] --out DIR
 
 Bad input gives one clear line on stderr and exit status 2; a run that goes
-unstable gives one line naming step, particles and quantity and exit status 3.
+unstable gives one line naming step, particles and quantity and exit status 3;
+a file that cannot be written (full disk, no permission) or a machine without
+the memory a run needs gives one line and exit status 1 (the last checkpoint
+and the H5MD frames already written are kept); SIGINT (Ctrl-C) stops a run or
+a study with "interrupted" and exit status 130, the last checkpoint kept.
+A second run writing the same ``--out`` folder as a running one is refused.
 """
 
 import argparse
+import contextlib
+import errno
 import json
 import os
+import signal
 import sys
-import time
 from pathlib import Path
 
 from . import __version__
-from .errors import InputError, InstabilityError
+from .errors import INTERRUPTED, InputError, InstabilityError, OutputError
 
+EXIT_OUTPUT = 1
 EXIT_INPUT = 2
 EXIT_INSTABILITY = 3
+EXIT_INTERRUPTED = 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -56,6 +65,11 @@ def _read_config(path):
     params = data.get("params", data)
     if not isinstance(params, dict):
         raise InputError("--config", str(path), "a table of key = value parameters")
+    if "params" in data:
+        extra = [k for k in data if k not in ("scene", "params")]
+        if extra:
+            raise InputError("--config", f"{path}: {extra[0]}", "top-level keys scene and [params] only "
+                             "(parameters go in [params])")
     out = {}
     for k, v in params.items():
         if isinstance(v, dict):
@@ -87,13 +101,18 @@ def cmd_run(args):
     from .scenes import get_scene
     _threads(args)
     overrides = {}
+    scene = get_scene(args.scene)
     if args.config:
         cfg, scene_name = _read_config(args.config)
         if scene_name and scene_name != args.scene:
             raise InputError("--config", args.config, f"a config for scene '{args.scene}' (it is for '{scene_name}')")
+        known = [p.name for p in scene.params]
+        for k in cfg:
+            if k not in known:
+                raise InputError("--config", f"{args.config}: {k}", f"a parameter of scene '{scene.name}': "
+                                 + ", ".join(known))
         overrides.update(cfg)
     overrides.update(_parse_sets(args.set))
-    scene = get_scene(args.scene)
     kw = {}
     if args.restart:
         kw["restart"] = args.restart
@@ -117,7 +136,9 @@ def cmd_study(args):
     _threads(args)
     study = get_study(args.study)
     out = Path(args.out) if args.out else None
-    res = study(_parse_sets(args.set), out=out, progress=not (args.quiet or args.json))
+    from .scenes.lifecycle import check_out, lock_out
+    with lock_out(check_out(out)):
+        res = study(_parse_sets(args.set), out=out, progress=not (args.quiet or args.json))
     if args.json:
         print(json.dumps(res, default=str))
     return 0
@@ -222,7 +243,52 @@ def build_parser():
     return p
 
 
+def _on_sigint(signum, frame):
+    """SIGINT: remember it (a run checks at every frame, so an interrupt a library swallowed
+    still stops it) and raise KeyboardInterrupt as Python's own handler does."""
+    INTERRUPTED[0] = True
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _sigint_handler():
+    try:
+        prev = signal.signal(signal.SIGINT, _on_sigint)
+    except ValueError:                  # not the main thread: leave signals alone
+        yield
+        return
+    INTERRUPTED[0] = False
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, prev)
+
+
+def _interrupted():
+    from .scenes.lifecycle import LAST_CHECKPOINT
+    msg = "clusterdyn: interrupted"
+    if LAST_CHECKPOINT.get("path") and os.path.exists(LAST_CHECKPOINT["path"]):
+        msg += (f"; the last checkpoint ({LAST_CHECKPOINT['path']}, step {LAST_CHECKPOINT['step']}) is kept: "
+                f"continue with --restart {LAST_CHECKPOINT['path']}")
+    print(msg, file=sys.stderr)
+    return EXIT_INTERRUPTED
+
+
+_WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO)
+
+
 def main(argv=None):
+    with _sigint_handler():
+        try:
+            code = _main(argv)
+        except KeyboardInterrupt:
+            return _interrupted()
+        if INTERRUPTED[0]:              # an interrupt some library swallowed: still not a success
+            return _interrupted()
+        return code
+
+
+def _main(argv=None):
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -230,20 +296,30 @@ def main(argv=None):
             parser.print_help()
             return EXIT_INPUT
         return args.func(args)
+    except BrokenPipeError:
+        # the reader of our output went away (clusterdyn list | head): stop quietly, as Unix tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except OutputError as exc:
+        print(f"clusterdyn: error: {exc}", file=sys.stderr)
+        return EXIT_OUTPUT
+    except MemoryError as exc:
+        print(f"clusterdyn: error: not enough memory for this run ({exc or 'an allocation failed'}); "
+              "choose a smaller sample", file=sys.stderr)
+        return EXIT_OUTPUT
+    except OSError as exc:
+        if exc.errno not in _WRITE_ERRNOS:
+            raise
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"clusterdyn: error: cannot write{where}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_OUTPUT
     except InputError as exc:
         print(f"clusterdyn: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except InstabilityError as exc:
         print(f"clusterdyn: unstable: {exc}", file=sys.stderr)
         return EXIT_INSTABILITY
-    except KeyboardInterrupt:
-        print("clusterdyn: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        # the reader of our output went away (clusterdyn list | head): stop quietly, as Unix tools do
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return 141
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ class InputError(ValueError):
         self.argument = argument
         self.value = value
         self.allowed = allowed
+        self.hint = hint
         msg = f"{argument}={value!r} is not allowed: expected {allowed}"
         if hint:
             msg += f" ({hint})"
@@ -27,6 +28,7 @@ class InstabilityError(CalculationFailed):
     """A run left the range where the model is valid (names step, particles, quantity)."""
 
     def __init__(self, message, step=None, particles=None, quantity=None, value=None, limit=None):
+        self.message = message
         self.step = step
         self.particles = tuple(int(p) for p in particles) if particles is not None else ()
         self.quantity = quantity
@@ -56,3 +58,44 @@ def check_positive(name, value, allow_zero=False):
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         raise InputError(name, value, "a finite number >= 0" if allow_zero else "a finite number > 0")
     return v
+
+
+class OutputError(OSError):
+    """Writing an output file failed (full disk, file too large, no permission).
+
+    The message names the file, the cause and what is kept (e.g. the last
+    checkpoint and the H5MD frames written before); the CLI prints it in one
+    line and exits with status 1.
+    """
+
+    def __init__(self, path, cause, kept=None):
+        import errno as _errno
+        self.path = str(path)
+        self.cause = cause
+        self.kept = kept
+        code = getattr(cause, "errno", None)
+        if code is None:                 # h5py's RuntimeError: find the errno in HDF5's message
+            import re
+            m = re.search(r"errno = (\d+)", str(cause))
+            code = int(m.group(1)) if m else None
+        import os
+        why = os.strerror(code) if code else (str(cause).splitlines()[0] if str(cause) else type(cause).__name__)
+        msg = f"cannot write {self.path}: {why}"
+        if kept:
+            msg += f"; kept: {kept}"
+        super().__init__(code if code is not None else _errno.EIO, msg)
+        self.message = msg
+
+    def __str__(self):
+        return self.message
+
+
+#: set by the CLI's SIGINT handler; a run checks it at every analysis frame, so an interrupt
+#: that a library swallowed ("Exception ignored in ...") still stops the run there
+INTERRUPTED = [False]
+
+
+def check_interrupt():
+    """Raise KeyboardInterrupt if a SIGINT arrived (see :data:`INTERRUPTED`)."""
+    if INTERRUPTED[0]:
+        raise KeyboardInterrupt

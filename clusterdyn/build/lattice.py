@@ -165,8 +165,19 @@ def fcc_packing(material, r0, size=(4, 4, 4), direction=(1, 0, 0), pbc=False, sh
     Returns
     -------
     ase.Atoms with arrays ``material``, ``radius``, ``id``.
+
+    Raises
+    ------
+    clusterdyn.errors.InputError
+        ``material`` has no cold curve (an MCA material: build its automata
+        with :func:`clusterdyn.build.mca_packing`).
     """
     mat = get_material(material)
+    if mat.curve is None:
+        from ..materials import cd_material_names
+        raise InputError("material", getattr(mat, "name", material), "a Cluster Dynamics material (with a cold "
+                         "curve): " + ", ".join(cd_material_names()),
+                         hint="an MCA material: build its automata with clusterdyn.build.mca_packing")
     r0 = check_positive("r0", r0)
     key = parse_direction(direction)
     R = orientation_matrix(key)     # rows: lab axes in crystal coordinates

@@ -50,7 +50,6 @@ Fletcher-32 checksum, so damaged data are detected on reading.
 
 import json
 import os
-import tempfile
 import warnings
 
 import numpy as np
@@ -273,6 +272,19 @@ def _read_atoms(group):
     return atoms
 
 
+def _new_temp(folder, name):
+    """A new empty file beside the destination, created with mode 0666 less the umask (the mode
+    every other output gets; ``tempfile.mkstemp`` would give 0600)."""
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{name}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            return tmp
+        except FileExistsError:  # pragma: no cover - a name taken: try another
+            continue
+    raise FileExistsError(f"no free temporary name in {folder}")  # pragma: no cover
+
+
 def write_checkpoint(path, atoms, state=None):
     """Write ``atoms`` and ``state`` to the checkpoint file ``path``, atomically.
 
@@ -300,6 +312,11 @@ def write_checkpoint(path, atoms, state=None):
     clusterdyn.errors.InputError
         ``state`` is not a dict or holds a value of another type (the
         message names where), or the folder of ``path`` does not exist.
+    clusterdyn.errors.OutputError
+        The file could not be written (full disk, no permission); ``path``
+        still holds the previous checkpoint, if there was one.
+
+    The file gets mode 0666 less the umask, as every other output does.
     """
     import h5py
 
@@ -312,9 +329,7 @@ def write_checkpoint(path, atoms, state=None):
     if not os.path.isdir(folder):
         raise InputError("path", path, "a file in an existing folder",
                          hint=f"folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
-                               dir=folder)
-    os.close(fd)
+    tmp = _new_temp(folder, os.path.basename(path))
     try:
         with h5py.File(tmp, "w", track_order=True) as f:
             f.attrs["format"] = FORMAT
@@ -331,9 +346,12 @@ def write_checkpoint(path, atoms, state=None):
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, InputError):
+            from clusterdyn.errors import OutputError
+            raise OutputError(path, exc, "the previous checkpoint, if any, unchanged") from None
         raise
     try:                                  # make the rename itself durable
         dfd = os.open(folder, os.O_RDONLY)

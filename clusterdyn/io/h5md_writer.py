@@ -781,20 +781,17 @@ class H5MDWriter:
         return self._nframes
 
     def close(self):
-        """Flush and close the file (idempotent)."""
-        if self._file is not None:
-            self._file.flush()
-            self._file.close()
-            self._file = None
+        """Flush and close the file (idempotent).  The file is closed even when the flush
+        fails (a full disk): the error is raised after, once."""
+        f, self._file = self._file, None
+        if f is not None:
+            try:
+                f.flush()
+            finally:
+                f.close()
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass

@@ -41,6 +41,7 @@ import math
 import numpy as np
 from ase.md.md import MolecularDynamics
 
+from .. import units
 from ..errors import InputError, InstabilityError
 from ..md.drives import Drive, _Layer
 from ..md.layer_drives import Traction
@@ -435,8 +436,8 @@ class MCADynamics(MolecularDynamics):
                 p = np.nonzero(lk)[0][k]
                 raise InstabilityError(
                     "a linked pair stretched or compressed by more than half its rest distance: "
-                    f"unstable; reduce the time step (now {self.dt:.4g}, default "
-                    f"{default_timestep(self.atoms, st.materials):.4g}) or the loading rate",
+                    f"unstable; reduce the time step (now {self.dt / units.ns:.4g} ns, default "
+                    f"{default_timestep(self.atoms, st.materials) / units.ns:.4g} ns) or the loading rate",
                     step=st.step, particles=st.pid_p2[p], quantity="pair strain",
                     value=float(strain[k]), limit=0.5)
 

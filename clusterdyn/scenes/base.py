@@ -18,6 +18,8 @@ from pathlib import Path
 from .. import units
 from ..errors import InputError
 
+#: largest integer parameter (int64: seeds, counts)
+_INT_MAX = 2 ** 63 - 1024
 _NUM = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$")
 
 
@@ -72,7 +74,12 @@ class Param:
         hi = "inf" if self.high is None else f"{self.high:g}"
         lb = "(" if (self.low is None or self.low_open) else "["
         base = {"int": "an integer", "ints": "integers like 4x4x40"}.get(self.kind, "a number")
-        return f"{base} in {lb}{lo}, {hi}]{u}" + (" or none" if self.optional else "")
+        if self.kind == "int" and self.high is None:
+            hi = f"{_INT_MAX:.3g}"
+        if self.low is None and self.high is None and self.kind != "int":
+            return f"a finite number{u}" + (" or none" if self.optional else "")
+        rb = ")" if hi == "inf" else "]"
+        return f"{base} in {lb}{lo}, {hi}{rb}{u}" + (" or none" if self.optional else "")
 
     def parse(self, value):
         """Parse text (CLI) or a Python value; return the value in ASE units."""
@@ -120,7 +127,7 @@ class Param:
         if not math.isfinite(num):
             raise InputError(self.name, value, self._allowed())
         if self.kind == "int":
-            if unit_txt or num != int(num):
+            if unit_txt or num != int(num) or abs(num) > _INT_MAX:
                 raise InputError(self.name, value, self._allowed())
             self._check_range(num, text)
             return int(num)

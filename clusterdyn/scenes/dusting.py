@@ -160,12 +160,19 @@ class DustingScene(SceneDef):
                    "mass fraction against time, clusters per layer (CD paper figs. 18-20)")
     params = scene_params(PARAMS, h5md_frames=20)
 
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        return fcc_count(v["length"] * (v["periods"] * SQRT2 * v["r0"]) ** 2, v["r0"])
+
     def check(self, v):
         n = _cells(v)
         if n < MIN_CELLS:
             raise InputError("length", f"{v['length'] / units.mm:g}mm",
                              f"at least {MIN_CELLS} repeat cells (sqrt 2 r0 = {SQRT2 * v['r0'] / units.um:g} um "
                              f"each): {MIN_CELLS * SQRT2 * v['r0'] / units.mm:.3g} mm or more")
+        if v["probe"] > n * SQRT2 / 2:
+            raise InputError("probe", f"{v['probe']:g}", f"a depth in [0.5, {n * SQRT2 / 2:.4g}] r0 (half the "
+                             f"sample's length: the probe must stay near the rear face)")
         if v["periods"] * SQRT2 < 2.0 * v["rc"]:
             raise InputError("periods", v["periods"], f"a cross-section at least 2 rc r0 wide "
                              f"({math.ceil(2 * v['rc'] / SQRT2)} periods at rc = {v['rc']:g})")

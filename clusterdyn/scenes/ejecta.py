@@ -215,8 +215,9 @@ class ProfiledShockScene(SceneDef):
         Du = hugoniot_interpolant(hug["u"], hug["D"]) if hug is not None and len(hug["u"]) >= 2 else None
         Pu = (lambda x: pressure_at(x, hug)) if hug is not None and len(hug["u"]) >= 2 else None
         if v["drive_csv"] is not None:
-            hist = Table.read_csv(v["drive_csv"])
-            stress = hist.values.ndim == 1 and _csv_is_stress(v["drive_csv"])
+            from .lifecycle import read_history_csv
+            hist, kind = read_history_csv("drive_csv", v["drive_csv"], kinds=("u", "sigma"))
+            stress = hist.values.ndim == 1 and kind == "sigma"
             if hist.values.ndim != 1:
                 raise InputError("drive_csv", v["drive_csv"], "a CSV of one u_<unit> or sigma_<unit> column")
             if stress != (v["drive"] == "pressure"):
@@ -259,6 +260,13 @@ class ProfiledShockScene(SceneDef):
         return hist, info
 
     # -- lifecycle hooks -----------------------------------------------------------------
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        prof, A, lam, width, r0, depth = self.geometry(v)
+        if depth is None:
+            return None
+        return fcc_count(width * (depth + A) * v["slab_cells"] * repeat_lengths(_dir_key(v), r0)[2], r0)
+
     def check(self, v):
         mat = get_material(v["material"])
         if mat.curve is None:
@@ -275,6 +283,12 @@ class ProfiledShockScene(SceneDef):
             raise InputError("u", v["u"] / units.km_s, "none with drive=pressure (the stress is 'pressure')")
         if v["u_end"] > (v["u"] if v["u"] is not None else math.inf):
             raise InputError("u_end", v["u_end"] / units.km_s, "a speed <= u")
+        if v.get("spectrum_time") is not None and v["spectrum_time"] > v["t_end"] * (1 + 1e-9):
+            raise InputError("spectrum_time", f"{v['spectrum_time'] / units.us:g}us",
+                             f"none or a time within the run, 0-{v['t_end'] / units.us:g} us (t_end)")
+        if depth is not None and depth < A + 10 * r0:
+            raise InputError("depth", f"{depth / units.um:g}um", f">= the profile's amplitude + 10 r0 = "
+                             f"{(A + 10 * r0) / units.um:g} um")
         if lam is not None and lam < 4 * r0:
             raise InputError("r0", r0 / units.um, f"<= wavelength/4 = {lam / 4 / units.um:g} um (the profile "
                              "needs a few clusters per wavelength)")

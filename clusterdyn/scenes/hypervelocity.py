@@ -239,6 +239,10 @@ class HypervelocityScene(SceneDef):
                    "cloud, fragments, radiographs vs the CD paper's Table 2")
     params = scene_params(PARAMS, h5md_frames=12, checkpoint_every=10)
 
+    def estimate_particles(self, v):
+        from .lifecycle import fcc_count
+        return fcc_count(math.pi * v["radius"] ** 2 * v["thickness"] + math.pi / 6 * v["diameter"] ** 3, v["r0"])
+
     def check(self, v):
         if v["thickness"] < v["r0"]:
             raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the plate thickness "
@@ -254,7 +258,10 @@ class HypervelocityScene(SceneDef):
                 raise InputError("keep_within", f"{v['keep_within'] / units.mm:g}mm", f"at least "
                                  f"{need / units.mm:g} mm (the plate radius or the sphere's start, plus 2 r0: "
                                  "the region must hold the set-up)")
-        parse_times(v["image_times"], "image_times", [])
+        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
+        if late:
+            raise InputError("image_times", v["image_times"], f"auto or times within the run, 0-"
+                             f"{v['t_end'] / units.us:g} us (t_end)")
 
     def setup(self, v, stage):
         return build_hypervelocity(v)

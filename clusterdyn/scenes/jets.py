@@ -85,6 +85,9 @@ class JetsScene(ProfiledShockScene):
 
     def check(self, v):
         super().check(v)
+        if v["jet_window"] is not None and v["jet_window"] >= v["t_end"]:
+            raise InputError("jet_window", f"{v['jet_window'] / units.us:g}us", f"none or a start before the end "
+                             f"of the run, t_end = {v['t_end'] / units.us:g} us")
         if v["depth"] - v["amplitude"] < 10 * v["r0"]:
             raise InputError("depth", v["depth"] / units.mm, f">= amplitude + 10 r0 = "
                              f"{(v['amplitude'] + 10 * v['r0']) / units.mm:g} mm")

@@ -25,18 +25,24 @@ keys the scene marks ``restart=True`` (run length, output cadence), any
 other key is refused, and ``result.json`` records what actually ran.
 """
 
+import contextlib
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, InstabilityError
+from ..errors import InputError, InstabilityError, OutputError, check_interrupt
 
 #: checkpoint file name in the output folder
 CHECKPOINT = "checkpoint.h5"
+#: lock file in the output folder: one run writes a folder at a time
+LOCKFILE = ".clusterdyn.lock"
+#: the last checkpoint written in this process: {"path": str, "step": int}
+LAST_CHECKPOINT = {}
 
 
 @dataclass
@@ -103,6 +109,125 @@ def check_out(out):
     return p
 
 
+_HELD = {}          # real path of a locked folder -> [fd, depth]
+
+
+@contextlib.contextmanager
+def lock_out(out):
+    """Hold the output folder ``out`` for this process (created if needed) while the block runs.
+
+    An exclusive ``fcntl.flock`` on ``out/.clusterdyn.lock``: a second run (another
+    process) writing the same folder is refused in one line (InputError) before it
+    touches any file there, so the first run's files are never damaged.  Re-entrant
+    within one process (a CLI run that locked the folder, then the scene).  The lock
+    goes with the process: a killed run leaves no stale lock.
+    """
+    if out is None:
+        yield None
+        return
+    import fcntl
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    key = os.path.realpath(out)
+    if key in _HELD:
+        _HELD[key][1] += 1
+        try:
+            yield out
+        finally:
+            _HELD[key][1] -= 1
+        return
+    path = out / LOCKFILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        try:
+            who = os.pread(fd, 64, 0).decode(errors="replace").split()
+        except OSError:
+            who = []
+        os.close(fd)
+        raise InputError("--out", str(out), "a folder no other clusterdyn run is writing",
+                         hint=f"run {'pid ' + who[0] if who else 'of another process'} holds {path}; "
+                              "wait for it to end or choose another --out") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    _HELD[key] = [fd, 1]
+    try:
+        yield out
+    finally:
+        _HELD[key][1] -= 1
+        if _HELD[key][1] == 0:
+            del _HELD[key]
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+
+class _WriteWatch:
+    """Catch the write failures h5py reports only as "Exception ignored" (a chunk written when a
+    dataset is released on a full disk): they are recorded here instead of printed, and
+    :meth:`check` raises :class:`~clusterdyn.errors.OutputError` for them."""
+
+    def __init__(self):
+        self.failures = []
+        self._prev = None
+
+    def __enter__(self):
+        self._prev = sys.unraisablehook
+        sys.unraisablehook = self._hook
+        return self
+
+    def __exit__(self, *exc):
+        sys.unraisablehook = self._prev
+
+    def _hook(self, u):
+        where = f"{u.object!r} {u.err_msg or ''} {u.exc_value}"
+        if isinstance(u.exc_value, (OSError, RuntimeError)) and ("h5py" in where or "file write failed" in where):
+            self.failures.append(u.exc_value)
+            return
+        self._prev(u)
+
+    def check(self, path, kept):
+        if self.failures:
+            exc = self.failures[0]
+            self.failures.clear()
+            raise OutputError(path, exc, kept)
+
+
+#: room kept free beyond the estimated size of the next write (HDF5 metadata, allocation in blocks)
+WRITE_MARGIN = 1 << 18
+
+
+def room_for(path, need, kept=None):
+    """Raise :class:`~clusterdyn.errors.OutputError` (ENOSPC or EFBIG) unless ``need`` more bytes fit
+    in ``path`` (its file system's free space for us and the process's file-size limit), checked
+    *before* writing: HDF5 cannot always recover a file whose write failed half way, so a
+    run stops while its files are whole."""
+    import errno
+    import resource
+    path = Path(path)
+    folder = path.parent if not path.is_dir() else path
+    size = path.stat().st_size if path.is_file() else 0
+    try:
+        st = os.statvfs(folder)
+        free = st.f_bavail * st.f_frsize
+    except OSError:  # pragma: no cover - no statvfs
+        free = None
+    if free is not None and free < need + WRITE_MARGIN:
+        raise OutputError(path, OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)),
+                          (kept + "; " if kept else "") + f"{free / 2**20:.3g} MiB free, the next write needs "
+                          f"about {(need + WRITE_MARGIN) / 2**20:.3g} MiB")
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY and size + need + WRITE_MARGIN > soft:
+        raise OutputError(path, OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
+                          (kept + "; " if kept else "") + f"the file-size limit is {soft / 2**20:.3g} MiB")
+
+
+def _write_failure(exc):
+    """An exception that means a file could not be written (not bad input, not physics)."""
+    from ase.calculators.calculator import CalculationFailed
+    return isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, (CalculationFailed, InputError))
+
+
 def _same(a, b):
     """Parameter values equal (tuples and lists alike; floats exactly)."""
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
@@ -137,6 +262,9 @@ class SceneDef:
     params = ()
     #: H5MD file name stem (default: the scene's name)
     h5md_stem = None
+    #: what a user can change from the command line after an instability (formatted with the
+    #: parameters; added to the message), e.g. the MCA scenes' ``steps``
+    instability_hint = None
 
     # -- hooks -------------------------------------------------------------------------
     def check(self, v):
@@ -181,11 +309,21 @@ class SceneDef:
         """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
         known = {p.name: p for p in self.params}
         vals = self.defaults()
+        self._given = {k: str(x) for k, x in (overrides or {}).items()}
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
             vals[k] = known[k].parse(x)
         return vals
+
+    def given(self, p, value):
+        """A parameter's value as the user wrote it (for a refusal), else in its display unit."""
+        text = getattr(self, "_given", {}).get(p.name if not isinstance(p, str) else p)
+        if text is not None:
+            return text
+        if isinstance(p, str):
+            p = {q.name: q for q in self.params}[p]
+        return _display(p, value)
 
     def restart_keys(self):
         return [p.name for p in self.params if getattr(p, "restart", False)]
@@ -201,6 +339,7 @@ class SceneDef:
             else:
                 vals[p.name] = p.parse(p.default) if p.default is not None else None
         allowed = self.restart_keys()
+        self._given = {k: str(x) for k, x in (overrides or {}).items()}
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
@@ -214,12 +353,19 @@ class SceneDef:
         return vals
 
     def run(self, overrides=None, out=None, progress=True, restart=None):
-        """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`."""
-        from ..io.checkpoint import load_run, read_run_extra
-        from .base import SceneResult
+        """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`.
+
+        Bad input, an output folder another run holds (:func:`lock_out`), a sample that
+        cannot fit in memory and a run estimated past ``max_wall`` hours are refused in one
+        line before any work.  A file that cannot be written (full disk) raises
+        :class:`~clusterdyn.errors.OutputError` naming it and what is kept: the last
+        checkpoint (replaced only once a new one is complete) and the H5MD frames written.
+        """
+        from ..io.checkpoint import read_run_extra
         t0 = time.perf_counter()
         out = check_out(out)
         resume = None
+        check_interrupt()
         if restart is not None:
             if not Path(restart).is_file():
                 raise InputError("--restart", str(restart), "an existing checkpoint file")
@@ -232,9 +378,113 @@ class SceneDef:
             resume = extra
         else:
             v = self.parse(overrides)
-        self.check(v)
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
+        try:
+            self._check_sizes(v)
+            self.check(v)
+            self._check_memory(v)
+        except InputError as exc:
+            text = getattr(self, "_given", {}).get(exc.argument)
+            if text is None or exc.value == text:
+                raise
+            raise InputError(exc.argument, text, exc.allowed, hint=getattr(exc, "hint", None)) from None
+        with lock_out(out), _WriteWatch() as watch:
+            if out is not None:
+                self._check_writable(v, out)
+            return self._run_locked(v, out, progress, restart, resume, watch, t0)
+
+    # -- run budget: wall time and memory, estimated before any work -------------------
+    #: particle-steps per second assumed for the wall-time estimate: conservative (the CD
+    #: engine does 1-3 million on two cores; MCA scenes set their own)
+    rate = 3.0e5
+    #: the same for MCA dynamics (pairs with state: about ten times the work per particle)
+    rate_mca = 3.0e4
+    #: bytes per particle assumed for the memory estimate (positions, momenta, forces, the
+    #: neighbour list and the analysis: a low bound, so that only a run that cannot fit is refused)
+    bytes_per_particle = 1000
+    #: estimated wall times past this (s) are announced in one line on stderr
+    wall_note_s = 3600.0
+
+    def estimate_particles(self, v):
+        """Particles the set-up will build, from the parameters alone (None: not known before set-up)."""
+        return None
+
+    def _check_memory(self, v):
+        n = self.estimate_particles(v)
+        if n is None:
+            return
+        need = float(n) * self.bytes_per_particle
+        try:
+            have = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):  # pragma: no cover - no sysconf
+            return
+        if need > have:
+            raise InputError("parameters", _sizes_text(self, v),
+                             f"a sample that fits in memory ({have / 2**30:.3g} GiB here)",
+                             hint=f"about {n:.3g} particles would need at least {need / 2**30:.3g} GiB")
+
+    def _check_wall(self, v, stage):
+        """Estimate the stage's wall time (particle-steps / :attr:`rate`) before it starts; one line
+        past :attr:`wall_note_s`, a refusal past ``max_wall`` hours."""
+        steps = max(0, int(stage.nsteps) - int(getattr(stage.dyn, "nsteps", 0)))
+        n = len(stage.atoms)
+        rate = self.rate_mca if type(stage.dyn).__name__ == "MCADynamics" else self.rate
+        est = float(n) * steps / rate
+        limit_h = v.get("max_wall")
+        if limit_h is not None and est > limit_h * 3600.0:
+            raise InputError("max_wall", self.given("max_wall", limit_h), f"hours >= the run's estimate, {est / 3600:.3g} h",
+                             hint=f"{n} particles x {steps:.4g} steps at <= {rate:.3g} particle-steps/s; "
+                                  f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
+        if est > self.wall_note_s:
+            upto = "up to " if stage.stop is not None else ""
+            print(f"clusterdyn: note: {self.name}: this run is estimated at {upto}{_hours(est)} "
+                  f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
+
+    def _check_frames(self, v, stage):
+        """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).
+
+        A default (not given) larger than a short run is lowered to the run's steps, and
+        ``result.json`` records the number used."""
+        n = int(stage.nsteps)
+        for key in ("frames", "h5md_frames"):
+            want = v.get(key)
+            if want is None or n < 1 or (key == "frames" and want != stage.frames):
+                continue
+            if int(want) > n:
+                if key not in getattr(self, "_given", {}):
+                    v[key] = n
+                    if key == "frames":
+                        stage.frames = n
+                    continue
+                raise InputError(key, self.given(key, want), f"at most the run's {n} steps (one frame per step)")
+
+    #: parameters that set the size of a cluster or automaton, and the range the model is checked in
+    size_params = ("r0", "d", "r0_inclusion")
+    size_range_m = (1e-8, 1.0)
+
+    def _check_sizes(self, v):
+        from .. import units
+        lo, hi = self.size_range_m
+        for p in self.params:
+            val = v.get(p.name)
+            if p.name in self.size_params and p.unit and isinstance(val, float):
+                if not lo * units.m <= val <= hi * units.m:
+                    raise InputError(p.name, self.given(p, val), f"a size in [{lo * 1e9:g} nm, {hi:g} m] (clusters "
+                                     "from 10 nm to 1 m: outside it the arithmetic in Angstrom loses the physics)")
+
+    def _check_writable(self, v, out):
+        """Refuse an output folder holding a file this run would have to overwrite but may not."""
+        names = [CHECKPOINT, "result.json"]
+        if v.get("h5md", False):
+            names += [self._h5md_path(out, n, len(self.plan(v))).name for n in self.plan(v)]
+        for name in names:
+            f = out / name
+            if f.exists() and not os.access(f, os.W_OK):
+                raise InputError("--out", str(out), "a folder whose files clusterdyn may overwrite",
+                                 hint=f"{f} is read-only")
+
+    def _run_locked(self, v, out, progress, restart, resume, watch, t0):
+        from ..io.checkpoint import load_run
+        from .base import SceneResult
         summaries = list(resume["summaries"]) if resume else []
         names = self.plan(v)
         files = []
@@ -253,14 +503,25 @@ class SceneDef:
                         stage.t_run = float(st.get("t_run", 0.0))
                         resume = None
                     else:
-                        atoms, dyn, info = self.setup(v, name)
+                        try:
+                            atoms, dyn, info = self.setup(v, name)
+                        except MemoryError as exc:
+                            raise InputError("parameters", _sizes_text(self, v), "a sample that fits in memory",
+                                             hint=str(exc)) from None
                         stage = self.attach(v, name, atoms, dyn, info)
-                    files += self._run_stage(v, k, stage, summaries, out, progress, len(names))
+                    if attempt == 0:
+                        self._check_frames(v, stage)
+                        self._check_wall(v, stage)
+                    files += self._run_stage(v, k, stage, summaries, out, progress, len(names), watch)
                     break
                 except InstabilityError as exc:
                     attempt += 1
                     nv = None if restart is not None else self.retry(v, name, exc, attempt)
                     if nv is None:
+                        if self.instability_hint and getattr(exc, "message", None) is not None:
+                            raise InstabilityError(f"{exc.message}; {self.instability_hint.format(**v)}", exc.step,
+                                                   exc.particles or None, exc.quantity, exc.value,
+                                                   exc.limit) from None
                         raise
                     v = nv
             summaries.append(self.finish(v, stage))
@@ -272,7 +533,10 @@ class SceneDef:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]
         res.wall_time_s = time.perf_counter() - t0
         if out is not None:
-            res.files.append(res.write(out))
+            try:
+                res.files.append(res.write(out))
+            except OSError as exc:
+                raise OutputError(out / "result.json", exc, "the H5MD frames and the last checkpoint") from None
         return res
 
     def display(self, vals):
@@ -283,26 +547,60 @@ class SceneDef:
         stem = self.h5md_stem or self.name.replace("-", "_")
         return out / (f"{stem}.h5md" if nstages == 1 else f"{stem}_{name}.h5md")
 
-    def _run_stage(self, v, k, stage, summaries, out, progress, nstages):
+    def _run_stage(self, v, k, stage, summaries, out, progress, nstages, watch=None):
         from ..io.checkpoint import save_run
         from .common import run_frames
+        watch = watch if watch is not None else _WriteWatch()
         dyn = stage.dyn
         for fn, interval in stage.observers:
             dyn.attach(fn, interval=interval)
         writer = None
+        path = None
         files = []
+        ckpt = (out / CHECKPOINT) if (out is not None and v.get("checkpoint_every", 0)) else None
+
+        def kept():
+            parts = []
+            if writer is not None:
+                parts.append(f"{writer.nframes} H5MD frames in {path}")
+            if ckpt is not None:
+                last = LAST_CHECKPOINT.get("path") == str(ckpt) and LAST_CHECKPOINT.get("step")
+                parts.append(f"the checkpoint {ckpt} at step {last} (continue with --restart {ckpt})"
+                             if last is not False and last is not None else "no checkpoint written yet")
+            return "; ".join(parts) or None
+
         if out is not None and v.get("h5md", False):
             from ..io import H5MDWriter
             path = self._h5md_path(out, stage.name, nstages)
             kw = dict(dyn=dyn, parameters=self.display(v), observables=stage.observables or {},
                       per_particle=stage.per_particle or {})
-            if dyn.nsteps > 0 and path.exists():
-                writer = H5MDWriter(str(path), stage.atoms, mode="a", restart_step=dyn.nsteps, **kw)
-            else:
-                writer = H5MDWriter(str(path), stage.atoms, **kw)
-            dyn.attach(writer, interval=max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))))
+            try:
+                if dyn.nsteps > 0 and path.exists():
+                    writer = H5MDWriter(str(path), stage.atoms, mode="a", restart_step=dyn.nsteps, **kw)
+                else:
+                    writer = H5MDWriter(str(path), stage.atoms, **kw)
+                watch.check(path, kept())
+            except Exception as exc:
+                if not _write_failure(exc):
+                    raise
+                raise OutputError(path, exc, kept()) from None
+
+            grow = [0]
+
+            def write_frame():
+                before = path.stat().st_size
+                room_for(path, max(2 * grow[0], 128 * len(stage.atoms)), kept())
+                try:
+                    writer.write()
+                    watch.check(path, None)
+                    grow[0] = max(grow[0], path.stat().st_size - before)
+                except Exception as exc:
+                    if not _write_failure(exc):
+                        raise
+                    raise OutputError(path, exc, kept()) from None
+
+            dyn.attach(write_frame, interval=max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))))
             files.append(path)
-        ckpt = (out / CHECKPOINT) if (out is not None and v.get("checkpoint_every", 0)) else None
 
         def extra():
             return {"scene": self.name, "params": {kk: _plain(x) for kk, x in v.items()},
@@ -310,20 +608,112 @@ class SceneDef:
                     "stage": {"name": stage.name, "info": stage.info, "t_run": stage.t_run,
                               "analysis": stage.analysis.get_state() if stage.analysis is not None else {}}}
 
+        def save(p):
+            last = Path(p).stat().st_size if Path(p).is_file() else 0
+            room_for(Path(p).parent / (Path(p).name + ".new"), max(last + last // 4, 600 * len(stage.atoms)), kept())
+            try:
+                save_run(p, dyn, extra())
+                watch.check(p, None)
+            except Exception as exc:
+                if not _write_failure(exc):
+                    raise
+                raise OutputError(p, exc, kept()) from None
+            LAST_CHECKPOINT.update(path=str(p), step=int(dyn.nsteps))
+
         def on_frame(d):
+            check_interrupt()
             if stage.on_frame is not None:
                 stage.on_frame(d)
 
         desc = self.name if nstages == 1 else f"{self.name} ({stage.name})"
+        failed = False
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
-                                      save=lambda path: save_run(path, dyn, extra()), stop=stage.stop)
+                                      save=save, stop=stage.stop)
+        except OutputError:
+            failed = True
+            raise
         finally:
-            if writer is not None:
-                writer.close()
             dyn.observers.clear()
+            if writer is not None:
+                try:
+                    writer.close()
+                    watch.check(path, None)
+                except Exception as exc:
+                    watch.failures.clear()
+                    if not failed and _write_failure(exc):
+                        raise OutputError(path, exc, kept()) from None
+                    if not _write_failure(exc):
+                        raise
         return files
+
+
+def read_history_csv(name, path, kinds=("u",), signed=False):
+    """A drive history read from the CSV ``path`` given as parameter ``name``, checked before any work.
+
+    ``kinds`` are the value columns allowed: ``"u"`` (speed, u_<unit>), ``"sigma"``
+    (stress, sigma_<unit>).  Refused in one line naming ``name`` and the path as written:
+    a file that is not UTF-8 text, a header or rows the table reader refuses, a column of
+    another kind (a stress read as a speed), times that decrease or start after 0, and
+    (unless ``signed``) negative values.  Returns ``(Table, kind)``.
+    """
+    from ..md.drives import Table
+    text = str(path)
+    if not os.path.isfile(text):
+        raise InputError(name, text, "an existing CSV file")
+    try:
+        with open(text, encoding="utf-8") as fh:
+            head = fh.read()
+    except UnicodeDecodeError:
+        raise InputError(name, text, "a text CSV file (this file is not UTF-8 text)") from None
+    except OSError as exc:
+        raise InputError(name, text, f"a CSV file you may read ({exc.strerror})") from None
+    header = next((ln for ln in head.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    cols = [h.strip() for h in header.split(",")]
+    kind = "sigma" if any(c.startswith("sigma_") for c in cols) else "u"
+    want = " or ".join({"u": "a speed column u_<unit> (u_km_s, u_m_s, ...)",
+                        "sigma": "a stress column sigma_<unit> (sigma_GPa, ...)"}[k] for k in kinds)
+    if kind not in kinds:
+        raise InputError(name, text, f"a CSV with a time column and {want}",
+                         hint=f"its columns are {','.join(cols)}")
+    try:
+        hist = Table.read_csv(text)
+    except InputError as exc:
+        raise InputError(name, text, f"a CSV with a time column and {want}",
+                         hint=f"{exc.allowed}; its columns are {','.join(cols)}" if exc.argument == "columns"
+                         else str(exc.allowed)) from None
+    t = np.asarray(hist.times, float)
+    vals = np.asarray(hist.values, float)
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(vals))):
+        raise InputError(name, text, "a CSV of finite numbers")
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        raise InputError(name, text, "times that never decrease")
+    if not signed and np.any(vals < 0):
+        raise InputError(name, text, "values >= 0 (the drive pushes; a negative speed or stress pulls the "
+                         "sample apart)")
+    return hist, kind
+
+
+def fcc_count(volume, r0):
+    """Clusters of size ``r0`` in ``volume`` packed fcc (nearest neighbours r0 apart): sqrt(2) V / r0^3."""
+    return math.sqrt(2.0) * float(volume) / float(r0) ** 3
+
+
+def _hours(seconds):
+    if seconds < 3600:
+        return f"{seconds / 60:.3g} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.3g} h"
+    if seconds < 3 * 365 * 86400:
+        return f"{seconds / 86400:.3g} days"
+    return f"{seconds / (365 * 86400):.3g} years"
+
+
+def _sizes_text(scene, v):
+    """The size-setting parameters of a run as the user would write them (for a memory refusal)."""
+    sizes = [p for p in scene.params if p.unit in ("A", "Ang", "nm", "um", "mm", "m", "cm") or p.kind == "ints"]
+    return " ".join(f"{p.name}={scene.given(p, v[p.name])}" for p in sizes if v.get(p.name) is not None)
 
 
 def _display(p, value):
@@ -351,6 +741,8 @@ def scene_params(params, *, frames=None, h5md_frames=20, checkpoint_every=10):
               restart=True),
         Param("checkpoint_every", checkpoint_every, "analysis frames between checkpoints (with --out; "
               "0 = none)", kind="int", low=0, restart=True),
+        Param("max_wall", 24.0, "hours: a run estimated to take longer (particle-steps at a conservative "
+              "rate) is refused before it starts", low=0.0, low_open=True, restart=True),
     ]
     own = {p.name for p in params}
     return list(params) + [p for p in common if p.name not in own]

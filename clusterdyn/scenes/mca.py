@@ -65,6 +65,8 @@ def _material(v):
 
 
 class UniaxialScene(SceneDef):
+    instability_hint = ("on the command line the time step is fixed by d; a slower loading is more steps, "
+                        "--set steps= above {steps}")
     """``mca-tension`` / ``mca-compression`` on the lifecycle (module docstring)."""
 
     params = _params()

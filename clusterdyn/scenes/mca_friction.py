@@ -53,8 +53,10 @@ def _params():
         Param("material_top", "alumina", "upper block material", kind="choice", choices=MATERIALS),
         Param("d", 10.0, "automaton size (2R)", unit="um", low=0.0, low_open=True),
         Param("size", (24, 4), "each block: periodic length x height in automaton sizes", kind="ints", low=2),
-        Param("stress", 0.05, "normal stress pressing the blocks together (> 0)", unit="GPa"),
-        Param("V", 20.0, "sliding speed of the upper block's top row", unit="m/s"),
+        Param("stress", 0.05, "normal stress pressing the blocks together (> 0; below the softer block's "
+              "compressive or yield strength)", unit="GPa", low=0.0, low_open=True),
+        Param("V", 20.0, "sliding speed of the upper block's top row (> 0; at most 1% of the slower block's "
+              "bar wave speed, sqrt(E/rho): a quasi-static slide)", unit="m/s", low=0.0, low_open=True),
         Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s (>= 0)"),
         Param("mu1", 0.3, "dry friction coefficient (>= 0)"),
         Param("K_av", 0.0, "mean interlocking (>= 0)"),
@@ -217,11 +219,23 @@ class FrictionScene(SceneDef):
 
     name = "mca-friction"
     h5md_stem = "mca_friction"
+    instability_hint = ("on the command line the time step is fixed by d; a slower loading is more steps (the "
+                        "ramps are fractions of the run), --set steps= above {steps}")
     description = "MCA friction of two blocks: segment method (or explicit roughness), mu_dr vs time"
     params = _params()
 
     def check(self, v):
         _check_coefficients(v)
+        from ..materials import get_material
+        mats = [get_material(v["material"]), get_material(v["material_top"])]
+        strength = min((m.sigma_c if getattr(m, "sigma_c", None) else m.sigma_y) for m in mats)
+        if v["stress"] >= strength:
+            raise InputError("stress", self.given("stress", v["stress"]), f"a stress below the softer block's "
+                             f"compressive or yield strength, {strength / units.GPa:g} GPa")
+        vmax = 0.01 * min(math.sqrt(m.E / m.rho0) for m in mats)
+        if v["V"] > vmax:
+            raise InputError("V", self.given("V", v["V"]), f"a speed in (0, {vmax / units.m_s:.4g}] m/s "
+                             "(1% of the slower block's bar wave speed sqrt(E/rho): a quasi-static slide)")
         L, H = v["size"]
         if L < 3:
             raise InputError("size", f"{L}x{H}", "a periodic length of at least 3 automaton sizes")

@@ -201,7 +201,13 @@ class MultilayerScene(SceneDef):
             raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the thinnest layer {thin / units.mm:g} mm")
         if v["radius"] < v["diameter"]:
             raise InputError("radius", f"{v['radius'] / units.mm:g}mm", "at least the sphere diameter")
-        parse_times(v["image_times"], "image_times", [])
+        if v["diameter"] < 4 * v["r0"]:
+            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most a quarter of the sphere diameter, "
+                             f"{v['diameter'] / 4 / units.mm:g} mm (a sphere of a few clusters across)")
+        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
+        if late:
+            raise InputError("image_times", v["image_times"], f"auto or times within the run, 0-"
+                             f"{v['t_end'] / units.us:g} us (t_end)")
 
     def setup(self, v, stage):
         return build_multilayer(v)

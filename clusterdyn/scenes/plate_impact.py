@@ -474,10 +474,14 @@ def _profile_times(text, setup):
         cL = lattice_sound_speed(setup["c0"])
         transit = setup["target"] / cL
         return [f * transit for f in (0.2, 0.4, 0.6, 0.8, 1.0)]
+    items = [s.strip() for s in str(text).split(",")]
     try:
-        return [float(s) * units.ns for s in str(text).split(",") if s.strip()]
+        ts = [float(s) * units.ns for s in items]
     except ValueError:
         raise InputError("profile_times", text, "auto or times in ns like 20,40,60") from None
+    if not ts or not all(math.isfinite(t) and t >= 0 for t in ts):
+        raise InputError("profile_times", text, "auto or times in ns >= 0 like 20,40,60")
+    return ts
 
 
 def impact_quantities(name, setup, an, mat):
@@ -539,6 +543,11 @@ class PlateImpactScene(SceneDef):
         return s["atoms"], s["dyn"], info
 
     def attach(self, v, stage, atoms, dyn, info):
+        end = impact_duration(info, v["duration"])
+        late = [t for t in _profile_times(v["profile_times"], info) if t > end * (1 + 1e-9)]
+        if late:
+            raise InputError("profile_times", v["profile_times"], f"times within the run, 0-{end / units.ns:.4g} ns "
+                             "(set duration to run longer)")
         rec = ImpactRecord(atoms, dyn, info)
         return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])

@@ -306,11 +306,8 @@ def piston_history(u_history, u):
     if isinstance(u_history, Table):
         hist = u_history
     else:
-        try:
-            hist = Table.read_csv(u_history)
-        except InputError as exc:
-            raise InputError("u_history", u_history, f"a U(t) CSV file: {exc.allowed}",
-                             hint=f"{exc.argument}={exc.value!r}") from None
+        from .lifecycle import read_history_csv
+        hist, _ = read_history_csv("u_history", u_history, kinds=("u",))
     top = hist.max_abs()
     if top > u * (1 + 1e-12):
         raise InputError("u_history", str(u_history), f"a history no faster than u = {u / units.km_s:g} km/s "
@@ -591,6 +588,11 @@ class ShockScene(SceneDef):
                                  f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
         if v["u_history"] is not None:
             piston_history(v["u_history"], v["u"])
+        if v["fit_from"] != "auto":
+            travel = 0.8 * size[0] * repeat_lengths(v["direction"], 1.0)[0]     # the run stops there (in r0)
+            if float(v["fit_from"]) >= travel:
+                raise InputError("fit_from", v["fit_from"], f"auto or a front travel below {travel:.4g} r0 (the run "
+                                 f"ends when the front has crossed 0.8 of the {text} sample)")
 
     @staticmethod
     def size(v):

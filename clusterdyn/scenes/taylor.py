@@ -184,6 +184,8 @@ def build_taylor(v):
         calc = ClusterDynamics(rc=rc)
     atoms.calc = calc
     relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
+    if relax is None:
+        atoms.get_forces()            # relax_cycles=0: the calculator's set-up (its potentials) all the same
     atoms.set_momenta(np.zeros((len(atoms), 3)))
     pot = calc.potentials[0]
     # the relaxed rod at rest: its length and the outline's calibration offset
@@ -319,6 +321,9 @@ class TaylorScene(SceneDef):
         if g < 3.0 * r0:
             raise InputError("grain_size", f"{g / units.mm:g}mm", f"at least 3 r0 = {3 * r0 / units.mm:.4g} mm "
                              "(the smallest grain of the polycrystal builder)")
+        if g > min(v["D0"], v["L0"]):
+            raise InputError("grain_size", f"{g / units.mm:g}mm", f"at most the rod's diameter and length, "
+                             f"{min(v['D0'], v['L0']) / units.mm:g} mm")
 
     def setup(self, v, stage):
         return build_taylor(v)

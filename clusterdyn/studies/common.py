@@ -38,7 +38,11 @@ class ListParam(Param):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             value = [value]
         if isinstance(value, str):
-            items = [x.strip() for x in value.split(",") if x.strip()]
+            items = [x.strip() for x in value.split(",")]
+            if len(items) > 1 and not all(items):
+                raise InputError(self.name, value, f"a comma-separated list of numbers in {self.unit} without "
+                                 "empty items")
+            items = [x for x in items if x]
             parts = [_NUM.match(x) for x in items]
             tail = parts[-1].group(2) if parts and parts[-1] else ""
             items = [x + tail if (m and not m.group(2) and tail) else x for x, m in zip(items, parts)]
@@ -52,6 +56,8 @@ class ListParam(Param):
         for it in items:
             v = single.parse(it)
             out.append(float(f"{v / units.NAMED[self.unit]:.12g}") if self.unit else v)
+        if len(set(out)) < len(out):
+            raise InputError(self.name, value, "a list without repeated values (each run once)")
         return tuple(out)
 
 
@@ -85,6 +91,12 @@ def parse_params(params, overrides, forward=None, study="study"):
             raise InputError("--set", k, f"a parameter of study '{study}': " + ", ".join(allowed))
     if forward is not None:
         forward.parse(fwd)          # fail early on a bad forwarded value
+    if vals.get("cache") is not None:
+        from ..scenes.lifecycle import check_out
+        try:
+            check_out(vals["cache"])
+        except InputError as exc:
+            raise InputError("cache", vals["cache"], exc.allowed) from None
     return vals, fwd
 
 

@@ -481,12 +481,23 @@ def _plot_cycle(res, path):
     return Path(path)
 
 
+def _degrading_materials():
+    from ..materials import get_material, material_names
+    return tuple(n for n in material_names() if getattr(get_material(n), "response", None)
+                 in ("degrading", "plastic-degrading"))
+
+
+def _cd_materials():
+    from ..materials import cd_material_names
+    return tuple(cd_material_names())
+
+
 ELASTICITY_PARAMS = [
     Param("size", 5.0, "box edge of the elasticity samples in automaton sizes", low=2.0),
-    Param("material", "Al", "Cluster Dynamics material of the contrast", kind="str"),
+    Param("material", "Al", "Cluster Dynamics material of the contrast", kind="choice", choices=_cd_materials()),
 ]
 DEGRADING_PARAMS = [
-    Param("material", "concrete", "degrading MCA material", kind="str"),
+    Param("material", "concrete", "degrading MCA material", kind="choice", choices=_degrading_materials()),
     Param("steps", 6000, "steps of the whole load-unload-reload cycle", kind="int", low=100),
     Param("peak", 0.95, "peak strain as a fraction of sigma_t/E", low=0.0, high=1.0, low_open=True),
     Param("damping", 0.1, "viscous damping of relative pair velocity", low=0.0),

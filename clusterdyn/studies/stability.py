@@ -238,11 +238,27 @@ def find_limit(material, u, v, log=None):
                       "stopped_by": r["stopped_by"], "steps": r["steps"]} for d, r in runs]}
 
 
+def _check_sizes(v):
+    """The piston sample and the periodic block big enough for their boundaries (before any run)."""
+    from ..scenes.shock import MIN_CELLS
+    rep = math.sqrt(2.0)                # [100] repeat cell, in r0
+    need = int(math.ceil(2.0 * v["rc"] / rep))
+    nx, ny, nz = v["size"]
+    if nx < MIN_CELLS or min(ny, nz) < need:
+        raise InputError("size", "x".join(map(str, v["size"])), f"at least {MIN_CELLS} cells along the shock and "
+                         f"{need} across (a periodic cross-section 2 rc r0 wide), e.g. {max(nx, MIN_CELLS)}x"
+                         f"{max(ny, need)}x{max(nz, need)}")
+    if min(v["rest_size"]) < need:
+        raise InputError("rest_size", "x".join(map(str, v["rest_size"])), f"at least {need} cells each way (a "
+                         "periodic block 2 rc r0 wide)")
+
+
 def stability_study(overrides=None, out=None, progress=True, quiet=None):
     """Run the stability study (see the module docstring); returns a JSON-ready dict."""
     t_start = time.perf_counter()
     quiet = (not progress) if quiet is None else quiet
     v, _ = parse_params(PARAMS, overrides, study="stability")
+    _check_sizes(v)
     mat = v["material"]
     folder = out_folder(out, "stability", mat)
     bar = progress_bar(len(v["u"]), f"stability {mat}", progress)
