@@ -169,7 +169,7 @@ class Piston(_Layer):
         return m
 
     def get_state(self):
-        return {"kind": "Piston", "index": self.index.copy(), "direction": self.direction.copy(),
+        return {"kind": self.kind, "index": self.index.copy(), "direction": self.direction.copy(),
                 "history": self.history.get_state(), "lateral": self.lateral, **self._records_state()}
 
     @classmethod
@@ -408,7 +408,7 @@ class Traction(_Layer):
         return self.history.max_abs()
 
     def get_state(self):
-        return {"kind": "Traction", "index": self.index.copy(), "normal": self.normal.copy(),
+        return {"kind": self.kind, "index": self.index.copy(), "normal": self.normal.copy(),
                 "tangent": None if self.tangent is None else self.tangent.copy(),
                 "stress": self.stress.get_state(), "history": self.history.get_state(),
                 "area": self.area, "normal_velocity": float(self.normal_velocity),

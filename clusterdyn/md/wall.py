@@ -326,7 +326,7 @@ class Wall(Drive):
     def get_state(self):
         K = self._K_t if self._K_t is not None else self.stiffness
         dc = self._dc_t if self._dc_t is not None else self.cutoff
-        return {"kind": "Wall", "point": self.point.copy(), "normal": self.normal.copy(),
+        return {"kind": self.kind, "point": self.point.copy(), "normal": self.normal.copy(),
                 "stiffness": None if K is None else np.array(K), "cutoff": None if dc is None else np.array(dc),
                 "sticking": self.sticking, "index": None if self.index is None else self.index.copy(),
                 "dissipated": float(self.dissipated), **self._records_state()}
