@@ -11,10 +11,10 @@ from ..errors import InputError, InstabilityError
 from ..materials import get_material
 from ..neighbors import NeighborList
 from ..potentials import DEFAULT_RC, N_BINS, ClusterPotential, MixedPairPotential, build_tables, check_rc
-from ..neighbors.celllist import gather_velocities, kick_drift_gather
+from ..engine.integrate import gather_velocities, kick_drift_gather
 from ..buffers import grown
 from ..parallel import STREAM_BLOCK, use_threads
-from . import _cd_kernels as K
+from ..engine import pair as K
 
 #: arrays besides ASE's own whose change invalidates cached results
 STATE_ARRAYS = ("material", "bonds0", "id")
@@ -396,7 +396,7 @@ class ClusterDynamics(Calculator):
         """The dynamics' first half kick and drift fused with the next pair loop's gathers.
 
         ``momenta += h forces; positions += dt momenta/m``
-        (:func:`clusterdyn.neighbors.celllist.kick_drift_gather`), with the
+        (:func:`clusterdyn.engine.integrate.kick_drift_gather`), with the
         sorted positions (and velocities if ``damped``) and the rebuild test's
         displacements taken in the same pass; the next :meth:`compute` on these
         positions uses them.  Returns (max v^2, its particle), or None when the
@@ -459,7 +459,7 @@ class ClusterDynamics(Calculator):
         ``forces`` ((N, 3), caller's order: the last force pass's own, constraints apart), their
         pair forces are subtracted from it, with the pair damping at that pass's velocities when
         ``damped``: the forces that pass gives without those pairs
-        (:func:`clusterdyn.calculators._cd_kernels.pairs_touching`, one pass over the list)."""
+        (:func:`clusterdyn.engine.pair.pairs_touching`, one pass over the list)."""
         mask = np.ascontiguousarray(mask_n, dtype=np.bool_)
         if mask.shape != (len(atoms),):
             raise InputError("mask_n", f"shape {mask.shape}", f"one bool per particle ({len(atoms)},)")
@@ -514,7 +514,7 @@ class ClusterDynamics(Calculator):
     def _check_close(self, stat, types, step, x2, low, nclose):
         """``x2``: the smallest r^2/r0^2 of the pass (NaN if any is); ``low``, ``nclose``: the
         smallest and the sum of the chunks' counts of pairs below the table
-        (:func:`~clusterdyn.calculators._cd_kernels.chunk_stats`)."""
+        (:func:`~clusterdyn.engine.pair.chunk_stats`)."""
         if low < 0:
             # a single-material step kernel does not count the pairs below the table: recount
             # (the tracking variant) only when the smallest distance is below it
