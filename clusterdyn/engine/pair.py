@@ -10,20 +10,23 @@ caller's row ``perm_n[i]``.  The chunks depend on the particle count only,
 not on the thread count, so forces are bit-identical on any number of
 threads, and no two threads write one row.
 
-Specialisation: one loop body (:func:`_chunk`) with compile-time flags,
-inlined into small module-level kernels (cached on disk by numba), one per
-variant; LLVM removes the code of every term a variant does not use.
+Arguments: namedtuples of arrays, :class:`PairArgs` (the list and the particles),
+:class:`Tables`, :class:`Chunks`, :class:`PassBuffers` and :class:`Finish`, plus a
+:class:`Variant` of compile-time flags.  Specialisation: one loop body (:func:`_chunk`),
+inlined into small module-level kernels (cached on disk by numba), one per :class:`Variant`
+constant (:data:`KERNELS`; :func:`select` picks one from what a pass asks); LLVM removes the
+code of every term a variant does not use.
 
 - ``MULTI``: more than one material (type lookups per pair); else the
   single table ``[0, 0]`` is read with its constants hoisted out of the loop.
 - ``DAMP``: pair damping of CD eq. (6) fused into the loop.
 - ``VIR``: the cell virial (for ``stress``).
 - ``PP``: per-particle energies and virials (``energies``, ``stresses``).
-- ``INIT``: ``attraction="initial"`` (a run-time flag of the multi-material
-  kernels, which also serve single-material runs that use it).
+- ``attraction="initial"``: a run-time flag (``PairArgs.initial``) of the
+  multi-material kernels, which also serve single-material runs that use it.
 - ``ENERGY``: the pair energy (the dynamics' steps leave it out, about a
-  tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it only
-  when it is read).
+  tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it in a step's
+  pass only when an observer reads that step, else when it is read).
 - ``FIN``: the step kernels (forces only, damped or not) also write the
   force of every row no other chunk touches to ``out_nc[perm_n[i]]``, with
   the half kick ``p_nc += h f`` when ``p_nc`` is not empty, right after the
@@ -57,6 +60,7 @@ damping dissipates ``sum eta |v_i - v_j|^2`` (``DAMP`` variants; 0 otherwise)), 
 pair virial (xx yy zz yz xz xy), eV.
 """
 
+from collections import namedtuple
 from fractions import Fraction
 
 import numpy as np
@@ -78,6 +82,23 @@ FEW_CHUNKS = 4
 MIN_CHUNK_ROWS = 2048
 #: shared rows per block of :func:`reduce_shared`
 SHARED_BLOCK = 4096
+
+#: the list and the particles of a pass (rows in the list's order; ``type_s``: material ids of
+#: the rows, empty for one material; ``bonds_nk``, ``id_n``: set-up bonds and stable ids in the
+#: caller's order, read when ``initial``, the ``attraction="initial"`` rule)
+PairArgs = namedtuple("PairArgs", "xs_nc type_s first_n jp_p shift image_sc perm_n bonds_nk id_n initial")
+#: the pair tables (:func:`kernel_tables`) and the damping matrix (empty without damping)
+Tables = namedtuple("Tables", "gtab coef meta eta_tt")
+#: the chunks of a list (:func:`chunk_layout`)
+Chunks = namedtuple("Chunks", "bounds span boff cptr clist shared_n shared_r owner_r")
+#: a pass's buffers: the chunks' force rows, their stats and virials, the rows' velocities (empty
+#: without damping) and the per-particle rows (empty unless asked)
+PassBuffers = namedtuple("PassBuffers", "f_mc stat_k vir_k6 vs_nc e_m1 w_m6")
+#: where a pass's forces go: ``out_nc`` (caller's order) and the half kick ``p_nc += h f``
+#: (``p_nc`` empty: none)
+Finish = namedtuple("Finish", "out_nc p_nc h")
+#: the compile-time flags of a pass (module docstring); one kernel per value (:data:`KERNELS`)
+Variant = namedtuple("Variant", "MULTI DAMP VIR PP ENERGY TRACK FIN")
 
 
 def chunk_count(n, layer_rows):
@@ -184,8 +205,13 @@ def chunk_bounds(first_n, nchunks):
     return b
 
 
-@njit(cache=True, parallel=True)
 def chunk_layout(first_n, jp_p, jmask, nchunks):
+    """The :class:`Chunks` of a list (:func:`_chunk_layout`)."""
+    return Chunks(*_chunk_layout(first_n, jp_p, jmask, nchunks))
+
+
+@njit(cache=True, parallel=True)
+def _chunk_layout(first_n, jp_p, jmask, nchunks):
     """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist, shared_n, shared_r, owner_r).
 
     Chunk k owns rows ``bounds_k[k]:bounds_k[k+1]`` and writes rows
@@ -280,9 +306,10 @@ def _put3(out_nc, p_nc, o, sx, sy, sz, kick, h):
 
 
 @njit(cache=True, parallel=True)
-def reduce_shared(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, shared_r, owner_r, out_nc, p_nc, h):
+def reduce_shared(buf_mc, ch, perm_n, out_nc, p_nc, h):
     """:func:`reduce_rows` (three columns) over the shared rows only: the step kernels (``FIN``)
     have written every other row.  Fixed blocks of rows, so the same on any thread count."""
+    span_k2, boff_k, cptr_k, clist, shared_r, owner_r = ch.span, ch.boff, ch.cptr, ch.clist, ch.shared_r, ch.owner_r
     kick = p_nc.shape[0] > 0
     m = shared_r.shape[0]
     for b in prange((m + SHARED_BLOCK - 1) // SHARED_BLOCK):
@@ -318,13 +345,14 @@ def chunk_stats(stat_k6, perm_n):
 
 
 @njit(cache=True, parallel=True)
-def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc, p_nc, h):
+def reduce_rows(buf_mc, ch, perm_n, out_nc, p_nc, h):
     """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic).
 
     With three columns and ``p_nc`` non-empty, also the velocity-Verlet half
     kick ``p[perm[i]] += h * out[perm[i]]`` in the same pass (the dynamics'
     second kick; the constraints' momenta are set after it).
     """
+    bounds_k, span_k2, boff_k, cptr_k, clist = ch.bounds, ch.span, ch.boff, ch.cptr, ch.clist
     kick = p_nc.shape[0] > 0
     nk = bounds_k.shape[0] - 1
     nc = buf_mc.shape[1]
@@ -348,20 +376,18 @@ def reduce_rows(buf_mc, bounds_k, span_k2, boff_k, cptr_k, clist, perm_n, out_nc
 
 
 @njit(inline="always")
-def _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, tab, bounds_k, span_k2, boff_k,
-           f_mc, stat_k, vir_k6, vs_nc, eta_tt, pp, perm_n, init, fin,
-           MULTI, DAMP, VIR, PP, INIT, ENERGY, TRACK, FIN):
-    """The pair loop of chunk k (see the module docstring for the flags).
-
-    ``tab = (gtab, coef, meta)``, ``pp = (e_m1, w_m6)``, ``init = (bonds_nk, id_n)``,
-    ``fin = (shared_n, out_nc, p_nc, h)``: grouped so that a call stays under
-    CPython's 30 positional arguments (beyond them it passes a tuple, which numba
-    can not inline).
-    """
-    gtab, coef, meta = tab
-    e_m1, w_m6 = pp
-    bonds_nk, id_n = init
-    shared_n, out_nc, p_nc, h = fin
+def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h):
+    """The pair loop of chunk k: ``args`` :class:`PairArgs`, ``tab`` :class:`Tables`, ``ch``
+    :class:`Chunks` (read only), ``V`` the :class:`Variant` (a module constant of the calling
+    kernel: its flags fold away); the fields of :class:`PassBuffers` and :class:`Finish` come
+    one by one, because numba loses the writes to an array taken out of a tuple inside a
+    ``prange`` loop (numba 0.58: tests/core/test_sorted_kernels.py shows the kernels write)."""
+    MULTI, DAMP, VIR, PP, ENERGY, TRACK, FIN = V.MULTI, V.DAMP, V.VIR, V.PP, V.ENERGY, V.TRACK, V.FIN
+    INIT = args.initial if MULTI else False
+    xs_nc, type_s, first_n, jp_p = args.xs_nc, args.type_s, args.first_n, args.jp_p
+    shift, image_sc, perm_n, bonds_nk, id_n = args.shift, args.image_sc, args.perm_n, args.bonds_nk, args.id_n
+    gtab, coef, meta, eta_tt = tab.gtab, tab.coef, tab.meta, tab.eta_tt
+    bounds_k, span_k2, boff_k, shared_n = ch.bounds, ch.span, ch.boff, ch.shared_n
     off = boff_k[k] - span_k2[k, 0]
     offu = np.uint64(off)
     zero_img = np.uint32(image_sc.shape[0] // 2)
@@ -555,112 +581,178 @@ def _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, tab, bounds_k, span
     vir_k6[k, 5] = vxy
 
 
-# -- the variants (arguments: see _chunk; ``initial_only`` is read by the multi kernels only) ----
+# -- the variants: one module-level kernel per Variant constant (cached on disk by numba) ----
+
+V_FORCES_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
+V_FORCES_ENERGY_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
+V_VIRIAL_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
+V_DAMPED_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
+V_DAMPED_ENERGY_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
+V_PER_PARTICLE_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
+V_FORCES_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
+V_FORCES_ENERGY_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
+V_VIRIAL_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
+V_DAMPED_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
+V_DAMPED_ENERGY_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
+V_PER_PARTICLE_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
+
 
 @njit(cache=True, parallel=True)
-def cd_forces_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
-                f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
-                shared_n, out_nc, p_nc, h):
+def pass_forces_1(args, tab, ch, buf, fin):
     """One material: forces only (the dynamics' undamped step)."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), False, False, False, False, False, False, False, True)
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_FORCES_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_virial_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
-                       boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                       initial_only, shared_n, out_nc, p_nc, h):
+def pass_forces_energy_1(args, tab, ch, buf, fin):
+    """One material: forces and energy (an undamped step whose energy is read)."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_FORCES_ENERGY_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+
+
+@njit(cache=True, parallel=True)
+def pass_virial_1(args, tab, ch, buf, fin):
     """One material: forces, energy and cell virial."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), False, False, True, False, False, True, True, False)
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_VIRIAL_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_damped_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
-                       boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                       initial_only, shared_n, out_nc, p_nc, h):
-    """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order), no energy."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), False, True, False, False, False, False, False, True)
+def pass_damped_1(args, tab, ch, buf, fin):
+    """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order)."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_DAMPED_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_per_particle_1(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
-                             boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk,
-                             id_n, initial_only, shared_n, out_nc, p_nc, h):
+def pass_damped_energy_1(args, tab, ch, buf, fin):
+    """One material: damped forces and the (conservative) energy."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_DAMPED_ENERGY_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+
+
+@njit(cache=True, parallel=True)
+def pass_per_particle_1(args, tab, ch, buf, fin):
     """One material: forces, energy, virial and per-particle energies and virials."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), False, False, True, True, False, True, True, False)
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_PER_PARTICLE_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
-                    f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
-                    shared_n, out_nc, p_nc, h):
-    """Several materials (or attraction='initial'): forces, energy and cell virial."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), True, False, True, False, initial_only, True, True, False)
+def pass_forces_multi(args, tab, ch, buf, fin):
+    """Several materials (or attraction='initial'): forces only."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_FORCES_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_only_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2, boff_k,
-                         f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n, initial_only,
-                         shared_n, out_nc, p_nc, h):
-    """Several materials (or attraction='initial'): forces only (the dynamics' undamped step)."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), True, False, False, False, initial_only, False, True, True)
+def pass_forces_energy_multi(args, tab, ch, buf, fin):
+    """Several materials: forces and energy."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_FORCES_ENERGY_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_damped_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k, span_k2,
-                           boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n, bonds_nk, id_n,
-                           initial_only, shared_n, out_nc, p_nc, h):
-    """Several materials (or attraction='initial'): conservative + pair damping forces, no energy."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), True, True, False, False, initial_only, False, True, True)
+def pass_virial_multi(args, tab, ch, buf, fin):
+    """Several materials: forces, energy and cell virial."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_VIRIAL_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
 @njit(cache=True, parallel=True)
-def cd_forces_per_particle_multi(xs_nc, type_s, first_n, jp_p, shift, image_sc, gtab, coef, meta, bounds_k,
-                                 span_k2, boff_k, f_mc, stat_k, vir_k6, vs_nc, eta_tt, e_m1, w_m6, perm_n,
-                                 bonds_nk, id_n, initial_only, shared_n, out_nc, p_nc, h):
-    """Several materials (or attraction='initial'): with per-particle energies and virials."""
-    for k in prange(bounds_k.shape[0] - 1):
-        _chunk(k, xs_nc, type_s, first_n, jp_p, shift, image_sc, (gtab, coef, meta), bounds_k, span_k2, boff_k,
-               f_mc, stat_k, vir_k6, vs_nc, eta_tt, (e_m1, w_m6), perm_n, (bonds_nk, id_n),
-               (shared_n, out_nc, p_nc, h), True, False, True, True, initial_only, True, True, False)
+def pass_damped_multi(args, tab, ch, buf, fin):
+    """Several materials: conservative + pair damping forces."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_DAMPED_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
 
 
-#: kernel by (multi, mode), mode in "forces", "virial", "damped", "per_particle"
+@njit(cache=True, parallel=True)
+def pass_damped_energy_multi(args, tab, ch, buf, fin):
+    """Several materials: damped forces and the energy."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_DAMPED_ENERGY_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+
+
+@njit(cache=True, parallel=True)
+def pass_per_particle_multi(args, tab, ch, buf, fin):
+    """Several materials: with per-particle energies and virials."""
+    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
+    out_nc, p_nc = fin.out_nc, fin.p_nc
+    for k in prange(ch.bounds.shape[0] - 1):
+        _chunk(k, args, tab, ch, V_PER_PARTICLE_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+
+
+#: the kernel of each variant
 KERNELS = {
-    (False, "forces"): cd_forces_1,
-    (False, "virial"): cd_forces_virial_1,
-    (False, "damped"): cd_forces_damped_1,
-    (False, "per_particle"): cd_forces_per_particle_1,
-    (True, "forces"): cd_forces_only_multi,
-    (True, "virial"): cd_forces_multi,
-    (True, "damped"): cd_forces_damped_multi,
-    (True, "per_particle"): cd_forces_per_particle_multi,
+    V_FORCES_1: pass_forces_1,
+    V_FORCES_ENERGY_1: pass_forces_energy_1,
+    V_VIRIAL_1: pass_virial_1,
+    V_DAMPED_1: pass_damped_1,
+    V_DAMPED_ENERGY_1: pass_damped_energy_1,
+    V_PER_PARTICLE_1: pass_per_particle_1,
+    V_FORCES_MULTI: pass_forces_multi,
+    V_FORCES_ENERGY_MULTI: pass_forces_energy_multi,
+    V_VIRIAL_MULTI: pass_virial_multi,
+    V_DAMPED_MULTI: pass_damped_multi,
+    V_DAMPED_ENERGY_MULTI: pass_damped_energy_multi,
+    V_PER_PARTICLE_MULTI: pass_per_particle_multi,
 }
 
 
+def select(multi, *, damped, per_particle, virial, energy, step):
+    """The variant of a pass: several materials (or ``attraction="initial"``) or one; damped;
+    per-particle energies and virials; the cell virial; the energy; ``step``: a dynamics step's
+    pass (forces with the half kick).  A pass without virial or per-particle output, damped or a
+    step, writes its unshared rows itself (``FIN``)."""
+    if damped:
+        return V_DAMPED_ENERGY_MULTI if multi and energy else V_DAMPED_MULTI if multi else \
+            V_DAMPED_ENERGY_1 if energy else V_DAMPED_1
+    if per_particle:
+        return V_PER_PARTICLE_MULTI if multi else V_PER_PARTICLE_1
+    if step and not virial:
+        return V_FORCES_ENERGY_MULTI if multi and energy else V_FORCES_MULTI if multi else \
+            V_FORCES_ENERGY_1 if energy else V_FORCES_1
+    if virial or energy:
+        return V_VIRIAL_MULTI if multi else V_VIRIAL_1
+    return V_FORCES_MULTI if multi else V_FORCES_1
+
+
+def run(variant, a, tab, ch, buf, fin):
+    """Run the pass of ``variant`` over every chunk."""
+    KERNELS[variant](a, tab, ch, buf, fin)
+
+
+def runner(variant, a, tab, ch, buf, fin):
+    """A call of :func:`run` with these arguments, for later (a rerun of a tracking pass)."""
+    kernel = KERNELS[variant]
+    return lambda: kernel(a, tab, ch, buf, fin)
+
+
 @njit(cache=True)
-def pairs_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, gtab, coef, meta, mask_n, perm_n,
-                   bonds_nk, id_n, init, vs_nc, eta_tt, f_nc):
+def pairs_touching(args, tab, mask_n, vs_nc, f_nc):
     """What the listed pairs with at least one particle in ``mask_n`` (caller's order) contribute:
     returns (energy, dissipation), and subtracts their forces from ``f_nc`` (caller's order;
     skipped when it is empty).  The energy as the energy passes count it (pairs within the cut-off
@@ -668,8 +760,12 @@ def pairs_touching(xs_nc, types_n, first_n, jp_p, shift, image_sc, gtab, coef, m
     loses when those particles are taken out.  The forces and the dissipation as the step kernels
     make them, with the pair damping when ``vs_nc`` (sorted rows' velocities, those of the force
     pass that made ``f_nc``) is not empty: ``f_nc`` minus them is that pass's forces without the
-    pairs.  ``types_n``: material ids in the caller's order, or empty (one material).  One thread,
-    rows and pairs in list order: the same bits on any thread count."""
+    pairs.  ``args.type_s``: material ids in the caller's order (not the rows'), or empty (one
+    material).  One thread, rows and pairs in list order: the same bits on any thread count."""
+    xs_nc, types_n, first_n, jp_p = args.xs_nc, args.type_s, args.first_n, args.jp_p
+    shift, image_sc, perm_n = args.shift, args.image_sc, args.perm_n
+    bonds_nk, id_n, init = args.bonds_nk, args.id_n, args.initial
+    gtab, coef, meta, eta_tt = tab.gtab, tab.coef, tab.meta, tab.eta_tt
     n = first_n.shape[0] - 1
     nbu = np.uint64(coef.shape[2] - 1)
     zero_img = np.uint32(image_sc.shape[0] // 2)
