@@ -28,6 +28,7 @@ from ..errors import InputError, InstabilityError
 from ..neighbors import NeighborList
 from ..parallel import STREAM_BLOCK, use_threads
 from ..potentials import build_tables
+from . import chunks as C
 from . import pair as K
 from .integrate import gather_velocities, kick_drift_gather
 
@@ -118,9 +119,9 @@ class CDEngine:
                    "vs_store": old["vs_store"]}
             self._lay = lay
         if lay["key"] != nl.version:
-            nk = K.chunk_count(n, nl.layer_rows)
+            nk = C.chunk_count(n, nl.layer_rows)
             lay["xs"] = nl.xs_nc          # the list's buffer of sorted positions (rewritten by each build)
-            lay["chunks"] = K.chunk_layout(nl.first_n, nl.jp_p, nl.j_mask, nk)
+            lay["chunks"] = C.chunk_layout(nl.first_n, nl.jp_p, nl.j_mask, nk)
             lay["stat_k"] = np.empty((nk, 6))
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["chunks"].boff[-1])
@@ -193,7 +194,7 @@ class CDEngine:
         K.run(variant, args, tab, ch, buf, fin)
         self.generation += 1
         self.passes["step" if kick is not None else "forces" if forces else "energy"] += 1
-        k, low, nclose = K.chunk_stats(stat, perm)
+        k, low, nclose = C.chunk_stats(stat, perm)
         # the step kernels take the smallest distance over every listed pair: beyond the cut-off
         # it means that no pair is within it
         x2 = stat[k, 1]
@@ -210,10 +211,10 @@ class CDEngine:
         self._check_close(stat, types, step, x2, low, nclose)
         if variant.FIN:
             use_threads(ch.shared_r.shape[0])
-            K.reduce_shared(lay["f_m3"], ch, perm, f_nc, p_kick, h)
+            C.reduce_shared(lay["f_m3"], ch, perm, f_nc, p_kick, h)
             use_threads(n)
         elif forces:
-            K.reduce_rows(lay["f_m3"], ch, perm, f_nc, p_kick, h)
+            C.reduce_rows(lay["f_m3"], ch, perm, f_nc, p_kick, h)
         res = {"forces": f_nc if forces else None, "energy": float(stat[:, 0].sum()) if variant.ENERGY else None}
         if damping is not None:
             res["dissipation"] = float(stat[:, 5].sum())     # eV per ASE time, >= 0
@@ -221,10 +222,10 @@ class CDEngine:
             res["virial"] = vir.sum(axis=0)
         if per_particle:
             e = np.empty((n, 1))
-            K.reduce_rows(lay["e_m1"], ch, perm, e, _NO_V, 0.0)
+            C.reduce_rows(lay["e_m1"], ch, perm, e, _NO_V, 0.0)
             res["energies"] = e[:, 0]
             w = np.empty((n, 6))
-            K.reduce_rows(lay["w_m6"], ch, perm, w, _NO_V, 0.0)
+            C.reduce_rows(lay["w_m6"], ch, perm, w, _NO_V, 0.0)
             res["virials"] = w
         if damping is not None:
             # this pass's velocities stay in lay["vs"] until the next pass (pairs_touching)
@@ -234,7 +235,7 @@ class CDEngine:
     def _check_close(self, stat, types, step, x2, low, nclose):
         """``x2``: the smallest r^2/r0^2 of the pass (NaN if any is); ``low``, ``nclose``: the
         smallest and the sum of the chunks' counts of pairs below the table
-        (:func:`~clusterdyn.engine.pair.chunk_stats`)."""
+        (:func:`~clusterdyn.engine.chunks.chunk_stats`)."""
         if low < 0:
             # a single-material step kernel does not count the pairs below the table: recount
             # (the tracking variant) only when the smallest distance is below it

@@ -4,14 +4,14 @@ Every kernel walks a half Verlet list over particles held in cell order
 (``clusterdyn.neighbors.NeighborList(sort=True)``: row k is particle
 ``perm_n[k]``) in fixed chunks of rows.  Chunk k accumulates into its own
 buffer rows, which cover only the rows its pairs touch (``span_k2[k]``: its
-own rows plus the few cell layers ahead of them), and :func:`reduce_rows`
+own rows plus the few cell layers ahead of them), and :func:`~clusterdyn.engine.chunks.reduce_rows`
 sums the buffers of a row in chunk order and scatters the sum to the
 caller's row ``perm_n[i]``.  The chunks depend on the particle count only,
 not on the thread count, so forces are bit-identical on any number of
 threads, and no two threads write one row.
 
 Arguments: namedtuples of arrays, :class:`PairArgs` (the list and the particles),
-:class:`Tables`, :class:`Chunks`, :class:`PassBuffers` and :class:`Finish`, plus a
+:class:`Tables`, :class:`~clusterdyn.engine.chunks.Chunks`, :class:`PassBuffers` and :class:`Finish`, plus a
 :class:`Variant` of compile-time flags.  Specialisation: one loop body (:func:`_chunk`),
 inlined into small module-level kernels (cached on disk by numba), one per :class:`Variant`
 constant (:data:`KERNELS`; :func:`select` picks one from what a pass asks); LLVM removes the
@@ -30,10 +30,10 @@ code of every term a variant does not use.
 - ``FIN``: the step kernels (forces only, damped or not) also write the
   force of every row no other chunk touches to ``out_nc[perm_n[i]]``, with
   the half kick ``p_nc += h f`` when ``p_nc`` is not empty, right after the
-  chunk's loop (its buffer rows are still in cache); :func:`reduce_shared`
+  chunk's loop (its buffer rows are still in cache); :func:`~clusterdyn.engine.chunks.reduce_shared`
   then sums only the shared rows, often few enough for one thread.  The sum
   of a row with one term is that term, so the forces are the same bits as
-  :func:`reduce_rows` gives.
+  :func:`~clusterdyn.engine.chunks.reduce_rows` gives.
 - ``TRACK``: the rows of the closest pair (the single-material steps keep
   only its distance; the calculator reruns a tracking variant when the pair
   is asked for, which with one material is only to name it in an error).
@@ -69,56 +69,31 @@ from numba import config, njit, prange
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-#: rows per chunk: the unit of work of a thread and of the summation order
-CHUNK_ROWS = 16384
-#: a chunk spans at least this many layers of the list's cells where there are at least
-#: :data:`MIN_CHUNKS` such chunks (a chunk's partners reach about one layer past its end)
-CHUNK_LAYERS = 16
-#: the fewest chunks that thick layers may bring the count down to
-MIN_CHUNKS = 16
-#: a list of fewer than ``FEW_CHUNKS * CHUNK_ROWS`` rows still gets up to this many chunks, of at
-#: least :data:`MIN_CHUNK_ROWS` rows, so that two to four threads share its pair loop
-FEW_CHUNKS = 4
-MIN_CHUNK_ROWS = 2048
-#: shared rows per block of :func:`reduce_shared`
-SHARED_BLOCK = 4096
+from .chunks import _put3
+
 
 #: the list and the particles of a pass (rows in the list's order; ``type_s``: material ids of
 #: the rows, empty for one material; ``bonds_nk``, ``id_n``: set-up bonds and stable ids in the
 #: caller's order, read when ``initial``, the ``attraction="initial"`` rule)
 PairArgs = namedtuple("PairArgs", "xs_nc type_s first_n jp_p shift image_sc perm_n bonds_nk id_n initial")
+
+
 #: the pair tables (:func:`kernel_tables`) and the damping matrix (empty without damping)
 Tables = namedtuple("Tables", "gtab coef meta eta_tt")
-#: the chunks of a list (:func:`chunk_layout`)
-Chunks = namedtuple("Chunks", "bounds span boff cptr clist shared_n shared_r owner_r")
+
+
 #: a pass's buffers: the chunks' force rows, their stats and virials, the rows' velocities (empty
 #: without damping) and the per-particle rows (empty unless asked)
 PassBuffers = namedtuple("PassBuffers", "f_mc stat_k vir_k6 vs_nc e_m1 w_m6")
+
+
 #: where a pass's forces go: ``out_nc`` (caller's order) and the half kick ``p_nc += h f``
 #: (``p_nc`` empty: none)
 Finish = namedtuple("Finish", "out_nc p_nc h")
+
+
 #: the compile-time flags of a pass (module docstring); one kernel per value (:data:`KERNELS`)
 Variant = namedtuple("Variant", "MULTI DAMP VIR PP ENERGY TRACK FIN")
-
-
-def chunk_count(n, layer_rows):
-    """Chunks of a list of n rows whose cell layers hold up to ``layer_rows`` rows.
-
-    About n / :data:`CHUNK_ROWS`; but a chunk's partners reach about one layer of cells past
-    its last row, into rows that the next chunk owns (summed afterwards, :func:`reduce_shared`,
-    and held in the chunk's own buffer rows), so where layers are thick (a compact body of a
-    million clusters: up to 22 000 rows a layer, half the rows shared at 16 384 rows a chunk)
-    chunks are made :data:`CHUNK_LAYERS` layers long, as long as there are at least
-    :data:`MIN_CHUNKS`.  A small list (under ``FEW_CHUNKS * CHUNK_ROWS`` rows) is cut into up to
-    :data:`FEW_CHUNKS` chunks of at least :data:`MIN_CHUNK_ROWS` rows (8 192 rows: 4 chunks),
-    where a chunk of 16 384 rows would leave a second thread nothing to do in the pair loop.
-    A property of the list alone, never of the thread count: the sums' order, and so the
-    forces' bits, do not depend on it.
-    """
-    nk = max(1, n // CHUNK_ROWS, min(FEW_CHUNKS, n // MIN_CHUNK_ROWS))
-    if layer_rows > 0:
-        nk = min(nk, max(MIN_CHUNKS, n // (CHUNK_LAYERS * layer_rows)))
-    return nk
 
 
 def kernel_tables(coef, meta):
@@ -186,199 +161,10 @@ def _bonded(bonds_nk, i, jid):
     return False
 
 
-@njit(cache=True)
-def chunk_bounds(first_n, nchunks):
-    """Split rows into nchunks ranges of about equal pair counts."""
-    n = first_n.shape[0] - 1
-    b = np.zeros(nchunks + 1, np.int64)
-    total = first_n[n]
-    i = 0
-    for k in range(1, nchunks):
-        target = total * k // nchunks
-        while i < n and first_n[i] < target:
-            i += 1
-        b[k] = i
-    b[nchunks] = n
-    for k in range(1, nchunks + 1):
-        if b[k] < b[k - 1]:
-            b[k] = b[k - 1]
-    return b
-
-
-def chunk_layout(first_n, jp_p, jmask, nchunks):
-    """The :class:`Chunks` of a list (:func:`_chunk_layout`)."""
-    return Chunks(*_chunk_layout(first_n, jp_p, jmask, nchunks))
-
-
-@njit(cache=True, parallel=True)
-def _chunk_layout(first_n, jp_p, jmask, nchunks):
-    """Chunks of a list: (bounds_k, span_k2, boff_k, cptr_k, clist, shared_n, shared_r, owner_r).
-
-    Chunk k owns rows ``bounds_k[k]:bounds_k[k+1]`` and writes rows
-    ``span_k2[k, 0]:span_k2[k, 1]`` into buffer rows starting at ``boff_k[k]``;
-    ``clist[cptr_k[k]:cptr_k[k+1]]`` are the chunks (ascending) whose span meets
-    the rows chunk k owns: the terms of those rows' sums, in order.
-    ``shared_n[i]`` is 1 for a row that a chunk other than its owner writes (a
-    partner row across a chunk boundary); ``shared_r`` lists them ascending and
-    ``owner_r`` their owner chunks.  Every other row's force is its owner's buffer
-    row alone, which the step kernels write out themselves (``FIN``).
-    """
-    bounds = chunk_bounds(first_n, nchunks)
-    nk = nchunks
-    n = first_n.shape[0] - 1
-    span = np.empty((nk, 2), np.int64)
-    shared_n = np.zeros(n, np.uint8)
-    for k in prange(nk):        # (chunks mark partner rows as shared: only ever the value 1)
-        lo = bounds[k]
-        hi = bounds[k + 1]
-        b0 = bounds[k]
-        b1 = bounds[k + 1]
-        for p in range(first_n[b0], first_n[b1]):
-            j = np.int64(jp_p[p] & jmask)
-            if j < lo:
-                lo = j
-            if j + 1 > hi:
-                hi = j + 1
-            if j < b0 or j >= b1:
-                shared_n[j] = 1
-        span[k, 0] = lo
-        span[k, 1] = hi
-    nsh = 0
-    for i in range(n):
-        nsh += shared_n[i]
-    shared_r = np.empty(nsh, np.int64)
-    owner_r = np.empty(nsh, np.int64)
-    q = 0
-    k = 0
-    for i in range(n):
-        if shared_n[i]:
-            while i >= bounds[k + 1]:
-                k += 1
-            shared_r[q] = i
-            owner_r[q] = k
-            q += 1
-    boff = np.zeros(nk + 1, np.int64)
-    for k in range(nk):
-        boff[k + 1] = boff[k] + span[k, 1] - span[k, 0]
-    cnt = 0
-    for k in range(nk):
-        for kk in range(nk):
-            if span[kk, 0] < bounds[k + 1] and span[kk, 1] > bounds[k]:
-                cnt += 1
-    cptr = np.zeros(nk + 1, np.int64)
-    clist = np.empty(cnt, np.int64)
-    q = 0
-    for k in range(nk):
-        for kk in range(nk):
-            if span[kk, 0] < bounds[k + 1] and span[kk, 1] > bounds[k]:
-                clist[q] = kk
-                q += 1
-        cptr[k + 1] = q
-    return bounds, span, boff, cptr, clist, shared_n, shared_r, owner_r
-
-
-@njit(inline="always")
-def _row_sum3(buf_mc, i, q0, q1, clist, span_k2, boff_k):
-    """Sum of row i's three columns over the chunks ``clist[q0:q1]`` whose span holds it, in order."""
-    sx = 0.0
-    sy = 0.0
-    sz = 0.0
-    for q in range(q0, q1):
-        kk = clist[q]
-        if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
-            r = boff_k[kk] + i - span_k2[kk, 0]
-            sx += buf_mc[r, 0]
-            sy += buf_mc[r, 1]
-            sz += buf_mc[r, 2]
-    return sx, sy, sz
-
-
-@njit(cache=True)
-def _put3(out_nc, p_nc, o, sx, sy, sz, kick, h):
-    """out[o] = s, and the half kick p[o] += h s when ``kick``."""
-    out_nc[o, 0] = sx
-    out_nc[o, 1] = sy
-    out_nc[o, 2] = sz
-    if kick:
-        p_nc[o, 0] += h * sx
-        p_nc[o, 1] += h * sy
-        p_nc[o, 2] += h * sz
-
-
-@njit(cache=True, parallel=True)
-def reduce_shared(buf_mc, ch, perm_n, out_nc, p_nc, h):
-    """:func:`reduce_rows` (three columns) over the shared rows only: the step kernels (``FIN``)
-    have written every other row.  Fixed blocks of rows, so the same on any thread count."""
-    span_k2, boff_k, cptr_k, clist, shared_r, owner_r = ch.span, ch.boff, ch.cptr, ch.clist, ch.shared_r, ch.owner_r
-    kick = p_nc.shape[0] > 0
-    m = shared_r.shape[0]
-    for b in prange((m + SHARED_BLOCK - 1) // SHARED_BLOCK):
-        for q in range(b * SHARED_BLOCK, min(m, (b + 1) * SHARED_BLOCK)):
-            i = shared_r[q]
-            k = owner_r[q]
-            sx, sy, sz = _row_sum3(buf_mc, i, cptr_k[k], cptr_k[k + 1], clist, span_k2, boff_k)
-            _put3(out_nc, p_nc, np.uint64(perm_n[i]), sx, sy, sz, kick, h)
-
-
-@njit(cache=True)
-def chunk_stats(stat_k6, perm_n):
-    """After a force pass: the closest pair's rows (columns 2, 3, where the loop tracked them)
-    renamed to the caller's rows through ``perm_n``, in place; returns (k, smallest of column
-    4, sum of column 4), k the chunk of the smallest r^2 (the first NaN if any, as
-    ``np.argmin``).  One call instead of a Python loop over the chunks and three numpy
-    reductions (about 10 us a step, a twentieth of a step of 2 048 clusters)."""
-    k = 0
-    best = stat_k6[0, 1]
-    low = stat_k6[0, 4]
-    tot = 0.0
-    for q in range(stat_k6.shape[0]):
-        for c in range(2, 4):
-            if stat_k6[q, c] >= 0:
-                stat_k6[q, c] = perm_n[np.int64(stat_k6[q, c])]
-        v = stat_k6[q, 1]
-        if best == best and (v != v or v < best):
-            k = q
-            best = v
-        low = min(low, stat_k6[q, 4])
-        tot += stat_k6[q, 4]
-    return k, low, tot
-
-
-@njit(cache=True, parallel=True)
-def reduce_rows(buf_mc, ch, perm_n, out_nc, p_nc, h):
-    """out[perm[i]] = sum over the chunks whose span holds row i, in chunk order (deterministic).
-
-    With three columns and ``p_nc`` non-empty, also the velocity-Verlet half
-    kick ``p[perm[i]] += h * out[perm[i]]`` in the same pass (the dynamics'
-    second kick; the constraints' momenta are set after it).
-    """
-    bounds_k, span_k2, boff_k, cptr_k, clist = ch.bounds, ch.span, ch.boff, ch.cptr, ch.clist
-    kick = p_nc.shape[0] > 0
-    nk = bounds_k.shape[0] - 1
-    nc = buf_mc.shape[1]
-    for k in prange(nk):
-        q0 = cptr_k[k]
-        q1 = cptr_k[k + 1]
-        for i in range(bounds_k[k], bounds_k[k + 1]):
-            o = np.uint64(perm_n[i])
-            if nc == 3:
-                sx, sy, sz = _row_sum3(buf_mc, i, q0, q1, clist, span_k2, boff_k)
-                _put3(out_nc, p_nc, o, sx, sy, sz, kick, h)
-            else:
-                for c in range(nc):
-                    out_nc[o, c] = 0.0
-                for q in range(q0, q1):
-                    kk = clist[q]
-                    if span_k2[kk, 0] <= i and i < span_k2[kk, 1]:
-                        r = boff_k[kk] + i - span_k2[kk, 0]
-                        for c in range(nc):
-                            out_nc[o, c] += buf_mc[r, c]
-
-
 @njit(inline="always")
 def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h):
     """The pair loop of chunk k: ``args`` :class:`PairArgs`, ``tab`` :class:`Tables`, ``ch``
-    :class:`Chunks` (read only), ``V`` the :class:`Variant` (a module constant of the calling
+    :class:`~clusterdyn.engine.chunks.Chunks` (read only), ``V`` the :class:`Variant` (a module constant of the calling
     kernel: its flags fold away); the fields of :class:`PassBuffers` and :class:`Finish` come
     one by one, because numba loses the writes to an array taken out of a tuple inside a
     ``prange`` loop (numba 0.58: tests/core/test_sorted_kernels.py shows the kernels write)."""
@@ -581,19 +367,39 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
     vir_k6[k, 5] = vxy
 
 
-# -- the variants: one module-level kernel per Variant constant (cached on disk by numba) ----
-
 V_FORCES_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
+
+
 V_FORCES_ENERGY_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
+
+
 V_VIRIAL_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
+
+
 V_DAMPED_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
+
+
 V_DAMPED_ENERGY_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
+
+
 V_PER_PARTICLE_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
+
+
 V_FORCES_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
+
+
 V_FORCES_ENERGY_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
+
+
 V_VIRIAL_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
+
+
 V_DAMPED_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
+
+
 V_DAMPED_ENERGY_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
+
+
 V_PER_PARTICLE_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
 
 

@@ -157,7 +157,7 @@ def test_step_kernels_write_unshared_rows_as_the_full_sum_does(periodic_x):
 
 
 def test_chunk_count_follows_the_layers_not_the_threads():
-    from clusterdyn.engine import pair as K
+    from clusterdyn.engine import chunks as K
     n = 40 * K.CHUNK_ROWS
     assert K.chunk_count(n, 0) == 40                               # no layers known: rows alone
     assert K.chunk_count(n, 1000) == 40                            # thin layers (a slab): rows alone
@@ -177,7 +177,7 @@ def test_chunks_of_a_compact_body_span_layers(monkeypatch):
     far fewer rows (and buffer rows) with the next, and give the same forces, on any thread count."""
     from clusterdyn.build.bodies import sphere
     from clusterdyn.calculators import ClusterDynamics
-    from clusterdyn.engine import pair as K
+    from clusterdyn.engine import chunks as K
     monkeypatch.setattr(K, "CHUNK_ROWS", 128)
     monkeypatch.setattr(K, "MIN_CHUNKS", 4)
     monkeypatch.setattr(K, "CHUNK_LAYERS", 4)
@@ -211,7 +211,7 @@ def test_chunk_stats_is_the_numpy_summary(nan_at):
     """``chunk_stats``: the closest pair's rows renamed through the permutation where tracked
     (-1 kept), the chunk of the smallest r^2 as ``np.argmin`` picks it (the first NaN if any),
     and the smallest and sum of the counts column."""
-    from clusterdyn.engine.pair import chunk_stats
+    from clusterdyn.engine.chunks import chunk_stats
     rng = np.random.default_rng(7)
     nk, n = 9, 50
     stat = np.column_stack([rng.normal(size=nk), rng.uniform(0.5, 2.0, nk), rng.integers(-1, n, nk),
