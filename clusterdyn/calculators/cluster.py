@@ -277,6 +277,12 @@ class ClusterDynamics(Calculator):
             return t
         return self._check_types(atoms)
 
+    def _bond_args(self, atoms):
+        """``(initial, bonds_nk, id_n)``: the set-up bonds as the LAMMPS export reads them (empty
+        arrays without ``attraction="initial"``)."""
+        b = self._bonds(atoms)
+        return (False, np.zeros((0, 0), np.int64), np.zeros(0, np.int64)) if b is None else (True, *b)
+
     def _bonds(self, atoms):
         """``(bonds_nk, id_n)`` for ``attraction="initial"``, else None."""
         if self.parameters["attraction"] != "initial":

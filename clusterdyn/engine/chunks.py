@@ -186,7 +186,7 @@ def _put3(out_nc, p_nc, o, sx, sy, sz, kick, h):
 def reduce_shared(buf_mc, ch, perm_n, out_nc, p_nc, h):
     """:func:`reduce_rows` (three columns) over the shared rows only: the step kernels (``FIN``)
     have written every other row.  Fixed blocks of rows, so the same on any thread count."""
-    span_k2, boff_k, cptr_k, clist, shared_r, owner_r = ch.span, ch.boff, ch.cptr, ch.clist, ch.shared_r, ch.owner_r
+    _, span_k2, boff_k, cptr_k, clist, _, shared_r, owner_r = ch
     kick = p_nc.shape[0] > 0
     m = shared_r.shape[0]
     for b in prange((m + SHARED_BLOCK - 1) // SHARED_BLOCK):
@@ -229,7 +229,7 @@ def reduce_rows(buf_mc, ch, perm_n, out_nc, p_nc, h):
     kick ``p[perm[i]] += h * out[perm[i]]`` in the same pass (the dynamics'
     second kick; the constraints' momenta are set after it).
     """
-    bounds_k, span_k2, boff_k, cptr_k, clist = ch.bounds, ch.span, ch.boff, ch.cptr, ch.clist
+    bounds_k, span_k2, boff_k, cptr_k, clist, _, _, _ = ch
     kick = p_nc.shape[0] > 0
     nk = bounds_k.shape[0] - 1
     nc = buf_mc.shape[1]

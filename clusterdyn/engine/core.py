@@ -58,8 +58,11 @@ class PassStats(dict):
             raise KeyError(key)
         if self._engine.generation != self._token:
             raise KeyError("closest: read it before the next compute")
-        kernel, args, stat, perm = self._rerun
-        kernel(*args)
+        # the tracking variant on the pass's arguments, without damping (vs, eta)
+        multi, args, ch, buf, fin, stat, perm = self._rerun
+        e = self._engine
+        track = K.select(multi, damped=False, per_particle=False, virial=True, energy=True, step=False)
+        K.run(track, args, (e.gtab, e.coef, e.meta, _NO_ETA), ch, buf[:3] + (_NO_V,) + buf[4:], fin)
         k = int(np.argmin(stat[:, 1]))
         v = (int(perm[int(stat[k, 2])]), int(perm[int(stat[k, 3])])) if stat[k, 2] >= 0 else (-1, -1)
         self[key] = v
@@ -101,6 +104,7 @@ class CDEngine:
         self._vs_pass = None       # the generation whose damped pass left its velocities in vs
         self._eta_tt = None
         self._bstat = None
+        self._variants = {}        # K.select's answers, by what a pass asks
 
     @property
     def multi(self):
@@ -122,6 +126,7 @@ class CDEngine:
             nk = C.chunk_count(n, nl.layer_rows)
             lay["xs"] = nl.xs_nc          # the list's buffer of sorted positions (rewritten by each build)
             lay["chunks"] = C.chunk_layout(nl.first_n, nl.jp_p, nl.j_mask, nk)
+            lay["ch"] = tuple(lay["chunks"])          # as the kernels take it
             lay["stat_k"] = np.empty((nk, 6))
             lay["vir_k6"] = np.empty((nk, 6))
             m = int(lay["chunks"].boff[-1])
@@ -180,17 +185,23 @@ class CDEngine:
             vs = lay["vs"]
             if not (fresh and adv[2]):
                 gather_velocities(p_nc, invm_n, perm, vs)
-        variant = K.select(multi, damped=damping is not None, per_particle=per_particle, virial=virial,
-                           energy=energy, step=kick is not None or out is not None)
+        key = (multi, damping is not None, per_particle, virial, energy, kick is not None or out is not None)
+        variant = self._variants.get(key)
+        if variant is None:
+            variant = self._variants[key] = K.select(key[0], damped=key[1], per_particle=key[2], virial=key[3],
+                                                     energy=key[4], step=key[5])
         stat, vir = lay["stat_k"], lay["vir_k6"]
         f_nc = _NO_V if not forces else np.empty((n, 3)) if out is None else out
         p_kick, h = (_NO_V, 0.0) if kick is None else (kick[0], float(kick[1]))
-        ch = lay["chunks"]
-        args = K.PairArgs(xs, types[perm] if multi else _NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc,
-                          perm, bonds_nk, id_n, initial)
-        tab = K.Tables(self.gtab, self.coef, self.meta, eta)
-        buf = K.PassBuffers(lay["f_m3"], stat, vir, vs, lay["e_m1"], lay["w_m6"])
-        fin = K.Finish(f_nc, p_kick, h)
+        # the kernels' arguments: plain tuples in the field order of K.PairArgs, K.Tables,
+        # K.PassBuffers and K.Finish (numba types a plain tuple of arrays in C; a namedtuple costs
+        # about 12 us more a call)
+        args = (xs, types[perm] if multi else _NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, perm,
+                bonds_nk, id_n, initial)
+        tab = (self.gtab, self.coef, self.meta, eta)
+        buf = (lay["f_m3"], stat, vir, vs, lay["e_m1"], lay["w_m6"])
+        fin = (f_nc, p_kick, h)
+        ch = lay["ch"]
         K.run(variant, args, tab, ch, buf, fin)
         self.generation += 1
         self.passes["step" if kick is not None else "forces" if forces else "energy"] += 1
@@ -204,13 +215,11 @@ class CDEngine:
             stats["closest"] = (int(stat[k, 2]), int(stat[k, 3]))
         else:
             # the tracking variant on the same arguments, without damping (vs, eta)
-            track = K.select(multi, damped=False, per_particle=False, virial=True, energy=True, step=False)
-            stats._rerun = (K.runner(track, args, K.Tables(self.gtab, self.coef, self.meta, _NO_ETA), ch,
-                                     buf._replace(vs_nc=_NO_V), fin), (), stat, perm)
+            stats._rerun = (multi, args, ch, buf, fin, stat, perm)
         self.last_stats = stats
         self._check_close(stat, types, step, x2, low, nclose)
         if variant.FIN:
-            use_threads(ch.shared_r.shape[0])
+            use_threads(lay["chunks"].shared_r.shape[0])
             C.reduce_shared(lay["f_m3"], ch, perm, f_nc, p_kick, h)
             use_threads(n)
         elif forces:
@@ -336,9 +345,8 @@ class CDEngine:
         initial = bonds is not None
         bonds_nk, id_n = bonds if initial else (_NO_BONDS, _NO_IDS)
         self.passes["touching"] += 1
-        args = K.PairArgs(xs, types if self.multi else _NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift,
-                          nl.image_sc, nl.perm_n, bonds_nk, id_n, initial)
-        e, d = K.pairs_touching(args, K.Tables(self.gtab, self.coef, self.meta,
-                                               self._eta_tt if damped else _NO_ETA),
+        args = (xs, types if self.multi else _NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, nl.perm_n,
+                bonds_nk, id_n, initial)
+        e, d = K.pairs_touching(args, (self.gtab, self.coef, self.meta, self._eta_tt if damped else _NO_ETA),
                                 mask, vs, _NO_V if forces is None else forces)
         return float(e), float(d)

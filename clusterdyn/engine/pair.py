@@ -10,12 +10,14 @@ caller's row ``perm_n[i]``.  The chunks depend on the particle count only,
 not on the thread count, so forces are bit-identical on any number of
 threads, and no two threads write one row.
 
-Arguments: namedtuples of arrays, :class:`PairArgs` (the list and the particles),
-:class:`Tables`, :class:`~clusterdyn.engine.chunks.Chunks`, :class:`PassBuffers` and :class:`Finish`, plus a
-:class:`Variant` of compile-time flags.  Specialisation: one loop body (:func:`_chunk`),
-inlined into small module-level kernels (cached on disk by numba), one per :class:`Variant`
-constant (:data:`KERNELS`; :func:`select` picks one from what a pass asks); LLVM removes the
-code of every term a variant does not use.
+Arguments: four tuples of arrays, whose fields the namedtuples :class:`PairArgs` (the list and
+the particles), :class:`Tables`, :class:`PassBuffers` and :class:`Finish` (and
+:class:`~clusterdyn.engine.chunks.Chunks`) name, plus a :class:`Variant` of compile-time flags.
+The kernels take them as plain tuples in that field order and unpack them by position: numba
+types a namedtuple argument in Python (about 0.4 us a field, 12 us a pass) but a plain tuple in
+C.  Specialisation: one loop body (:func:`_chunk`), inlined into small module-level kernels
+(cached on disk by numba), one per :class:`Variant` constant (:data:`KERNELS`; :func:`select`
+picks one from what a pass asks); LLVM removes the code of every term a variant does not use.
 
 - ``MULTI``: more than one material (type lookups per pair); else the
   single table ``[0, 0]`` is read with its constants hoisted out of the loop.
@@ -164,16 +166,14 @@ def _bonded(bonds_nk, i, jid):
 @njit(inline="always")
 def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h):
     """The pair loop of chunk k: ``args`` :class:`PairArgs`, ``tab`` :class:`Tables`, ``ch``
-    :class:`~clusterdyn.engine.chunks.Chunks` (read only), ``V`` the :class:`Variant` (a module constant of the calling
-    kernel: its flags fold away); the fields of :class:`PassBuffers` and :class:`Finish` come
-    one by one, because numba loses the writes to an array taken out of a tuple inside a
-    ``prange`` loop (numba 0.58: tests/core/test_sorted_kernels.py shows the kernels write)."""
+    :class:`~clusterdyn.engine.chunks.Chunks` (read only, as plain tuples in the namedtuples'
+    field order), ``V`` the :class:`Variant` (a module constant of the calling kernel: its flags
+    fold away); the fields of :class:`PassBuffers` and :class:`Finish` one by one (:func:`_pass`)."""
     MULTI, DAMP, VIR, PP, ENERGY, TRACK, FIN = V.MULTI, V.DAMP, V.VIR, V.PP, V.ENERGY, V.TRACK, V.FIN
-    INIT = args.initial if MULTI else False
-    xs_nc, type_s, first_n, jp_p = args.xs_nc, args.type_s, args.first_n, args.jp_p
-    shift, image_sc, perm_n, bonds_nk, id_n = args.shift, args.image_sc, args.perm_n, args.bonds_nk, args.id_n
-    gtab, coef, meta, eta_tt = tab.gtab, tab.coef, tab.meta, tab.eta_tt
-    bounds_k, span_k2, boff_k, shared_n = ch.bounds, ch.span, ch.boff, ch.shared_n
+    xs_nc, type_s, first_n, jp_p, shift, image_sc, perm_n, bonds_nk, id_n, initial = args
+    INIT = initial if MULTI else False
+    gtab, coef, meta, eta_tt = tab
+    bounds_k, span_k2, boff_k, _, _, shared_n, _, _ = ch
     off = boff_k[k] - span_k2[k, 0]
     offu = np.uint64(off)
     zero_img = np.uint32(image_sc.shape[0] // 2)
@@ -367,148 +367,104 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
     vir_k6[k, 5] = vxy
 
 
+
+@njit(inline="always")
+def _pass(args, tab, ch, buf, fin, V):
+    """Every chunk's loop, in parallel (the body of the kernels below).  The arrays a chunk
+    writes are taken out of their tuples here, outside the ``prange`` loop: numba loses the
+    writes to an array taken out of a tuple inside it (numba 0.58)."""
+    f_mc, stat_k, vir_k6, vs_nc, e_m1, w_m6 = buf
+    out_nc, p_nc, h = fin
+    for k in prange(ch[0].shape[0] - 1):
+        _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h)
+
+
+# -- the variants: one module-level kernel per Variant constant (cached on disk by numba) ----
+
 V_FORCES_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
-
-
 V_FORCES_ENERGY_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
-
-
 V_VIRIAL_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
-
-
 V_DAMPED_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
-
-
 V_DAMPED_ENERGY_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
-
-
 V_PER_PARTICLE_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
-
-
 V_FORCES_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
-
-
 V_FORCES_ENERGY_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
-
-
 V_VIRIAL_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
-
-
 V_DAMPED_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
-
-
 V_DAMPED_ENERGY_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
-
-
 V_PER_PARTICLE_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
 
 
 @njit(cache=True, parallel=True)
 def pass_forces_1(args, tab, ch, buf, fin):
     """One material: forces only (the dynamics' undamped step)."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_FORCES_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_FORCES_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_forces_energy_1(args, tab, ch, buf, fin):
     """One material: forces and energy (an undamped step whose energy is read)."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_FORCES_ENERGY_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_FORCES_ENERGY_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_virial_1(args, tab, ch, buf, fin):
     """One material: forces, energy and cell virial."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_VIRIAL_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_VIRIAL_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_damped_1(args, tab, ch, buf, fin):
     """One material: conservative + pair damping forces (velocities ``vs_nc`` in row order)."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_DAMPED_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_DAMPED_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_damped_energy_1(args, tab, ch, buf, fin):
     """One material: damped forces and the (conservative) energy."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_DAMPED_ENERGY_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_DAMPED_ENERGY_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_per_particle_1(args, tab, ch, buf, fin):
     """One material: forces, energy, virial and per-particle energies and virials."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_PER_PARTICLE_1, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_PER_PARTICLE_1)
 
 
 @njit(cache=True, parallel=True)
 def pass_forces_multi(args, tab, ch, buf, fin):
     """Several materials (or attraction='initial'): forces only."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_FORCES_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_FORCES_MULTI)
 
 
 @njit(cache=True, parallel=True)
 def pass_forces_energy_multi(args, tab, ch, buf, fin):
     """Several materials: forces and energy."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_FORCES_ENERGY_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_FORCES_ENERGY_MULTI)
 
 
 @njit(cache=True, parallel=True)
 def pass_virial_multi(args, tab, ch, buf, fin):
     """Several materials: forces, energy and cell virial."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_VIRIAL_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_VIRIAL_MULTI)
 
 
 @njit(cache=True, parallel=True)
 def pass_damped_multi(args, tab, ch, buf, fin):
     """Several materials: conservative + pair damping forces."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_DAMPED_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_DAMPED_MULTI)
 
 
 @njit(cache=True, parallel=True)
 def pass_damped_energy_multi(args, tab, ch, buf, fin):
     """Several materials: damped forces and the energy."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_DAMPED_ENERGY_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_DAMPED_ENERGY_MULTI)
 
 
 @njit(cache=True, parallel=True)
 def pass_per_particle_multi(args, tab, ch, buf, fin):
     """Several materials: with per-particle energies and virials."""
-    f_mc, stat_k, vir_k6, e_m1, w_m6 = buf.f_mc, buf.stat_k, buf.vir_k6, buf.e_m1, buf.w_m6
-    out_nc, p_nc = fin.out_nc, fin.p_nc
-    for k in prange(ch.bounds.shape[0] - 1):
-        _chunk(k, args, tab, ch, V_PER_PARTICLE_MULTI, buf.vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, fin.h)
+    _pass(args, tab, ch, buf, fin, V_PER_PARTICLE_MULTI)
 
 
 #: the kernel of each variant
@@ -546,15 +502,12 @@ def select(multi, *, damped, per_particle, virial, energy, step):
     return V_FORCES_MULTI if multi else V_FORCES_1
 
 
-def run(variant, a, tab, ch, buf, fin):
-    """Run the pass of ``variant`` over every chunk."""
-    KERNELS[variant](a, tab, ch, buf, fin)
+def run(variant, args, tab, ch, buf, fin):
+    """Run the pass of ``variant`` over every chunk (the arguments as plain tuples, see
+    :data:`PairArgs`)."""
+    KERNELS[variant](args, tab, ch, buf, fin)
 
 
-def runner(variant, a, tab, ch, buf, fin):
-    """A call of :func:`run` with these arguments, for later (a rerun of a tracking pass)."""
-    kernel = KERNELS[variant]
-    return lambda: kernel(a, tab, ch, buf, fin)
 
 
 @njit(cache=True)
@@ -568,10 +521,8 @@ def pairs_touching(args, tab, mask_n, vs_nc, f_nc):
     pass that made ``f_nc``) is not empty: ``f_nc`` minus them is that pass's forces without the
     pairs.  ``args.type_s``: material ids in the caller's order (not the rows'), or empty (one
     material).  One thread, rows and pairs in list order: the same bits on any thread count."""
-    xs_nc, types_n, first_n, jp_p = args.xs_nc, args.type_s, args.first_n, args.jp_p
-    shift, image_sc, perm_n = args.shift, args.image_sc, args.perm_n
-    bonds_nk, id_n, init = args.bonds_nk, args.id_n, args.initial
-    gtab, coef, meta, eta_tt = tab.gtab, tab.coef, tab.meta, tab.eta_tt
+    xs_nc, types_n, first_n, jp_p, shift, image_sc, perm_n, bonds_nk, id_n, init = args
+    gtab, coef, meta, eta_tt = tab
     n = first_n.shape[0] - 1
     nbu = np.uint64(coef.shape[2] - 1)
     zero_img = np.uint32(image_sc.shape[0] // 2)

@@ -40,9 +40,11 @@ from .stability import (TIMESTEP_FACTOR, StiffnessCheck, default_timestep, pair_
 #: a particle moving more than this many r0 in one step stops the run
 MAX_STEP_DISPLACEMENT = 0.25
 
-__all__ = ["DampedVerlet", "RegionOfInterest", "default_timestep", "pair_stability_limit", "stability_limit",
-           "MAX_STEP_DISPLACEMENT", "TIMESTEP_FACTOR"]
 
+def _on_engine(calc):
+    """Whether ``calc`` runs on a Cluster Dynamics engine (the fused steps; damping, sorts and
+    the default time step need one)."""
+    return isinstance(calc, ClusterDynamics)
 
 class DampedVerlet(MolecularDynamics):
     """Velocity Verlet for clusters, with optional pair damping (CD eq. 5-6).
@@ -134,7 +136,7 @@ class DampedVerlet(MolecularDynamics):
         speeds = [c.max_speed() for c in atoms.constraints if isinstance(c, Drive)]
         u_max = max([s for s in speeds if s is not None] + [0.0])
         if timestep is None:
-            if not isinstance(calc, ClusterDynamics):
+            if not _on_engine(calc):
                 raise InputError("timestep", None, "a time step (no default without ClusterDynamics)")
             if None in speeds:
                 raise InputError("timestep", None, "a time step: the default needs the drives' largest speed, "
@@ -236,7 +238,7 @@ class DampedVerlet(MolecularDynamics):
     def _calc_limit(atoms, calc, J):
         """The calculator checked for these Atoms and damping ``J`` (ClusterDynamics, set up,
         when J is given); returns its stability limit (None for another calculator)."""
-        if isinstance(calc, ClusterDynamics):
+        if _on_engine(calc):
             calc.setup(atoms)
             return stability_limit(calc)
         if J is not None:
@@ -261,7 +263,7 @@ class DampedVerlet(MolecularDynamics):
         :attr:`J`, and nothing kept of the previous calculator's (forces, energy, safe distances)."""
         self.calc = calc
         #: the calculator when it runs on a Cluster Dynamics engine (the fused steps), else None
-        self._cd = calc if isinstance(calc, ClusterDynamics) else None
+        self._cd = calc if _on_engine(calc) else None
         self.stability_limit = limit
         self._eta = calc.damping_matrix(self.J) if self.J is not None else None
         self._stiffness = None
@@ -281,7 +283,7 @@ class DampedVerlet(MolecularDynamics):
             ok = False
         if not ok:
             raise InputError("sort_interval", interval, "a positive whole number of steps, or None")
-        if not isinstance(atoms.calc, ClusterDynamics):
+        if not _on_engine(atoms.calc):
             raise InputError("atoms.calc", type(atoms.calc).__name__, "a ClusterDynamics calculator with sort_interval")
         cls._renumbering(atoms, "sort_interval=")
         return int(interval)

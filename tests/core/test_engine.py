@@ -9,6 +9,7 @@ from clusterdyn.build import fcc_packing
 from clusterdyn.calculators import ClusterDynamics
 from clusterdyn.io import H5MDWriter
 from clusterdyn.md import DampedVerlet
+from clusterdyn.md.pieces import Piece
 
 R0 = 5 * units.um
 
@@ -72,3 +73,42 @@ def test_a_run_without_observers_publishes_nothing():
     dyn = DampedVerlet(a, J=None)
     dyn.run(5)
     assert a.calc.results == {} and dict(a.calc.engine.passes) == {"forces": 1, "step": 5}
+
+
+class _Gravity(Piece):
+    """A uniform force g on every particle (energy -g.x): an attached force term."""
+
+    name = "gravity"
+    adds_forces = True
+
+    def __init__(self, g):
+        self.g = np.asarray(g, float)
+        self.orders = []
+
+    def add_forces(self, atoms, forces, kick):
+        forces += self.g
+        if kick is not None:
+            atoms.arrays["momenta"] += kick * self.g
+
+    def energy(self, atoms):
+        return -float((atoms.positions @ self.g).sum())
+
+    def reindexed(self, order):
+        self.orders.append(order.copy())
+
+
+def test_an_attached_force_term_is_integrated_with_the_pairs():
+    """A piece's forces join the step (its half kicks included): under a uniform force the total
+    momentum grows by N g t (the pair forces sum to zero), its energy is part of the potential
+    energy, and it is told of the sorts that renumber the particles."""
+    a = _box()
+    dyn = DampedVerlet(a, J=None, sort_interval=10)
+    g = np.array([0.0, 0.0, -1e-4 * R0 / dyn.dt ** 2]) * a.get_masses()[0]      # 1e-4 r0 / dt^2
+    term = dyn.attach_piece(_Gravity(g))
+    p0 = a.get_momenta().sum(axis=0)
+    dyn.run(30)
+    dp = a.get_momenta().sum(axis=0) - p0
+    np.testing.assert_allclose(dp, len(a) * g * 30 * dyn.dt, rtol=1e-9, atol=1e-9 * np.abs(g).max() * dyn.dt)
+    pair = a.calc.compute(a, virial=False)["energy"]
+    assert dyn.potential_energy == pytest.approx(pair + term.energy(a), rel=1e-12)
+    assert dyn.nsorts == len(term.orders) >= 1
