@@ -5,7 +5,7 @@ descheduled worker turns microseconds into milliseconds.  Kernels therefore
 use one thread per :data:`MIN_PARTICLES_PER_THREAD` particles, up to
 :func:`max_threads` (numba's thread count, or ``set_max_threads``).  The
 count depends only on N and the limit.  (The force sums do not depend on
-it at all: the kernels' chunks are fixed by N, see calculators._cd_kernels.)
+it at all: the kernels' chunks are fixed by N, see engine.pair.)
 
 OpenMP waiting: numba's default ``omp`` threading layer lets idle workers
 spin for about 3 ms (libgomp's default), which on a machine shared with other
@@ -37,7 +37,7 @@ import numba  # noqa: E402
 from numba import njit  # noqa: E402
 
 #: particles per thread below which a kernel runs on fewer threads (two threads from 8 192
-#: particles; the pair loop's chunks are cut small enough for them, ``calculators._cd_kernels``)
+#: particles; the pair loop's chunks are cut small enough for them, ``engine.pair``)
 MIN_PARTICLES_PER_THREAD = 4096
 #: particles per block of the streaming passes (kicks, drift, gathers): fixed, so their
 #: results do not depend on the thread count

@@ -20,6 +20,7 @@ LAYERS = [
     ("potentials", ("clusterdyn.potentials",)),
     ("build", ("clusterdyn.build",)),
     ("neighbors", ("clusterdyn.neighbors",)),
+    ("engine", ("clusterdyn.engine",)),
     ("calculators", ("clusterdyn.calculators",)),
     ("md", ("clusterdyn.md",)),
     ("mca", ("clusterdyn.mca",)),

@@ -232,8 +232,8 @@ def test_fast_path_runs_with_any_mix_of_drives_bit_for_bit():
     for fused in (True, False):
         a, dyn, drives = traction_block()
         calls = []
-        adv = a.calc._advance
-        a.calc._advance = (lambda *x, _adv=adv, _c=calls: _c.append(1) or _adv(*x)) if fused \
+        adv = a.calc.engine.advance
+        a.calc.engine.advance = (lambda *x, _adv=adv, _c=calls: _c.append(1) or _adv(*x)) if fused \
             else (lambda *x: None)
         dyn.run(100)
         assert (len(calls) == 100) == fused

@@ -164,8 +164,8 @@ def test_fused_passes_give_the_separate_passes_trajectory(J):
     for fused in (True, False):
         s = build_shock(size=(30, 3, 3), u=3 * units.km_s, J=J)
         calls = []
-        adv = s.calc._advance
-        s.calc._advance = (lambda *a, _adv=adv, _c=calls: _c.append(1) or _adv(*a)) if fused \
+        adv = s.calc.engine.advance
+        s.calc.engine.advance = (lambda *a, _adv=adv, _c=calls: _c.append(1) or _adv(*a)) if fused \
             else (lambda *a: None)
         s.dyn.run(80)
         assert s.calc.nl.nbuilds > 2

@@ -140,7 +140,7 @@ def test_removal_moves_rows_in_place_and_allocates_no_new_arrays():
     """A removal keeps the Atoms' arrays, the list's buffers and the force buffers (the kept rows
     moved to the front of the same memory: nothing of N's size is allocated, so removing does not
     raise the peak memory) and gives the same particles and forces as the kept rows themselves."""
-    from clusterdyn.md.damped import COMPACT_ROWS, _compact
+    from clusterdyn.md.region import COMPACT_ROWS, _compact
     atoms, out = _block()
     region = RegionOfInterest(hi=[atoms.positions[:, 0].max() + 3 * R0, np.inf, np.inf])
     atoms.calc.setup(atoms)

@@ -78,7 +78,7 @@ def test_forces_bit_identical_on_one_and_two_threads():
     assert np.array_equal(f1, f2)
     assert np.array_equal(p1["forces"], p2["forces"]) and np.array_equal(p1["virials"], p2["virials"])
     assert p1["energy"] == p2["energy"]
-    assert len(c._buffers["bounds"]) - 1 == 4
+    assert len(c.engine._lay["chunks"].bounds) - 1 == 4
 
 
 def test_sorted_kernels_match_a_direct_pair_sum():
@@ -117,10 +117,10 @@ def test_closest_pair_found_when_read_is_the_tracked_one():
     c, a = s.calc, s.atoms
     c.compute(a, virial=False, energy=False)
     st = c.last_stats
-    assert st._args is not None                       # not tracked by this kernel
+    assert st._rerun is not None                      # not tracked by this kernel
     lazy, x_lazy = st["closest"], st["min_r_over_r0"]
     c.compute(a)                                       # the virial kernel tracks the pair
-    assert c.last_stats._args is None
+    assert c.last_stats._rerun is None
     assert c.last_stats["closest"] == lazy and c.last_stats["min_r_over_r0"] == x_lazy < 1.0
     i, j = lazy
     assert a.get_distance(i, j, mic=True) / c.potentials[0].r0 == pytest.approx(x_lazy, rel=1e-12)
@@ -142,9 +142,9 @@ def test_step_kernels_write_unshared_rows_as_the_full_sum_does(periodic_x):
         a.pbc = True
         a.cell[0, 0] = a.positions[:, 0].max() + 0.9 * c.potentials[0].r0
     f_all = c.compute(a)["forces"].copy()                      # virial kernel: every row summed after
-    lay = c._buffers
-    assert len(lay["bounds"]) - 1 == 4
-    shared = lay["shared_r"].shape[0]
+    lay = c.engine._lay["chunks"]
+    assert len(lay.bounds) - 1 == 4
+    shared = lay.shared_r.shape[0]
     assert 0 < shared < len(a) // 4
     p0 = a.arrays["momenta"].copy()
     p = p0.copy()
@@ -157,7 +157,7 @@ def test_step_kernels_write_unshared_rows_as_the_full_sum_does(periodic_x):
 
 
 def test_chunk_count_follows_the_layers_not_the_threads():
-    from clusterdyn.calculators import _cd_kernels as K
+    from clusterdyn.engine import chunks as K
     n = 40 * K.CHUNK_ROWS
     assert K.chunk_count(n, 0) == 40                               # no layers known: rows alone
     assert K.chunk_count(n, 1000) == 40                            # thin layers (a slab): rows alone
@@ -177,7 +177,7 @@ def test_chunks_of_a_compact_body_span_layers(monkeypatch):
     far fewer rows (and buffer rows) with the next, and give the same forces, on any thread count."""
     from clusterdyn.build.bodies import sphere
     from clusterdyn.calculators import ClusterDynamics
-    from clusterdyn.calculators import _cd_kernels as K
+    from clusterdyn.engine import chunks as K
     monkeypatch.setattr(K, "CHUNK_ROWS", 128)
     monkeypatch.setattr(K, "MIN_CHUNKS", 4)
     monkeypatch.setattr(K, "CHUNK_LAYERS", 4)
@@ -190,19 +190,19 @@ def test_chunks_of_a_compact_body_span_layers(monkeypatch):
     try:
         set_max_threads(1)
         f_new = c.compute(a)["forces"].copy()
-        lay = c._buffers
-        nk, shared, buf = len(lay["bounds"]) - 1, lay["shared_r"].shape[0], int(lay["boff"][-1])
+        lay = c.engine._lay["chunks"]
+        nk, shared, buf = len(lay.bounds) - 1, lay.shared_r.shape[0], int(lay.boff[-1])
         assert c.nl.layer_rows > 4 * 128 and nk == max(4, n // (4 * c.nl.layer_rows))
         set_max_threads(2 if __import__("numba").config.NUMBA_NUM_THREADS >= 2 else 1)
         assert np.array_equal(c.compute(a)["forces"], f_new)
         monkeypatch.setattr(K, "chunk_count", lambda n, layer_rows: max(1, n // K.CHUNK_ROWS))   # rows alone
-        c._buffers["key"] = None
+        c.engine._lay["key"] = None
         f_old = c.compute(a)["forces"]
     finally:
         set_max_threads(None)
-    lay = c._buffers
-    assert len(lay["bounds"]) - 1 == n // 128
-    assert shared < 0.5 * lay["shared_r"].shape[0] and buf < 0.8 * lay["boff"][-1]
+    lay = c.engine._lay["chunks"]
+    assert len(lay.bounds) - 1 == n // 128
+    assert shared < 0.5 * lay.shared_r.shape[0] and buf < 0.8 * lay.boff[-1]
     assert np.abs(f_new - f_old).max() <= 1e-12 * np.abs(f_old).max()
 
 
@@ -211,7 +211,7 @@ def test_chunk_stats_is_the_numpy_summary(nan_at):
     """``chunk_stats``: the closest pair's rows renamed through the permutation where tracked
     (-1 kept), the chunk of the smallest r^2 as ``np.argmin`` picks it (the first NaN if any),
     and the smallest and sum of the counts column."""
-    from clusterdyn.calculators._cd_kernels import chunk_stats
+    from clusterdyn.engine.chunks import chunk_stats
     rng = np.random.default_rng(7)
     nk, n = 9, 50
     stat = np.column_stack([rng.normal(size=nk), rng.uniform(0.5, 2.0, nk), rng.integers(-1, n, nk),

@@ -11,8 +11,9 @@ from clusterdyn.errors import InputError
 from clusterdyn.io import H5MDWriter
 from clusterdyn.io.checkpoint import load_run, save_run
 from clusterdyn.md import DampedVerlet, Piston, default_timestep
-from clusterdyn.neighbors.celllist import (MAX_BRICK_REACH, NeighborList, _brick_centres, _brick_pair_safe,
-                                           _brick_radii, _bricks_safe)
+from clusterdyn.neighbors import NeighborList
+from clusterdyn.neighbors.rebuild import (MAX_BRICK_REACH, _brick_centres, _brick_pair_safe, _brick_radii,
+                                          _bricks_safe)
 
 R0 = 5 * units.um
 
