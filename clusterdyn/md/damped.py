@@ -271,7 +271,24 @@ class DampedVerlet(MolecularDynamics):
         self.damping_loss = 0.0
         self._dissipation = 0.0
         self._ledger0 = None
+        #: HOOK (boundary law, docs/theory.md 1.11): force terms with a history, attached with
+        #: :meth:`attach`, evaluated once per force pass; none by default (nothing runs)
+        self.terms = []
         self._drives()
+
+    def attach(self, term):
+        """HOOK: add a force term with its own history (e.g. :class:`clusterdyn.md.boundary.BoundaryTerm`).
+
+        It is evaluated in every force pass (in the step's pass, with the half-step momenta
+        before any kick, its history advanced), its forces added before the constraints see
+        them, its stored energy counted in :attr:`potential_energy`, its dissipation in the
+        ledger (``term_dissipated``) and its state in checkpoints (:meth:`get_state`)."""
+        if any(t.name == term.name for t in self.terms):
+            raise InputError("term", term.name, "a term not attached yet")
+        self.terms.append(term)
+        self.forces = None
+        self._epot = None
+        return term
 
     @staticmethod
     def _calc_limit(atoms, calc, J):
@@ -404,6 +421,8 @@ class DampedVerlet(MolecularDynamics):
         # kick) evaluates the positions of the step under way, which errors name
         at = self.nsteps if kick is None else self.nsteps + 1
         t0 = time.perf_counter()
+        for t in self.terms:      # HOOK: the terms read the half-step momenta before the kick
+            t.evaluate(atoms, self._invm_n, self.dt, mode=1 if kick is not None else 0)
         if isinstance(self.calc, ClusterDynamics):
             damping = None
             if self._eta is not None:
@@ -422,9 +441,11 @@ class DampedVerlet(MolecularDynamics):
                 self._check_stiffness(at)
         else:
             forces = np.ascontiguousarray(atoms.get_forces(apply_constraint=False), dtype=float)
-            self.potential_energy = atoms.get_potential_energy()
+            self.potential_energy = atoms.get_potential_energy() + sum(t.energy for t in self.terms)
             if kick is not None:
                 I.kick(atoms.arrays["momenta"], forces, kick)
+        for t in self.terms:      # HOOK: the terms' forces (and their half kick)
+            t.scatter(forces, atoms.arrays["momenta"] if kick is not None else None, 0.0 if kick is None else kick)
         for c in atoms.constraints:
             c.adjust_forces(atoms, forces)
         if kick is not None:
@@ -438,7 +459,7 @@ class DampedVerlet(MolecularDynamics):
     def potential_energy(self):
         if self._epot is None and self.forces is not None and isinstance(self.calc, ClusterDynamics):
             self._epot = (self.calc.compute(self.atoms, step=self.nsteps, virial=False, forces=False)["energy"]
-                          + self._constraint_energy())
+                          + self._constraint_energy() + sum(t.energy for t in self.terms))
         return self._epot
 
     @potential_energy.setter
@@ -642,7 +663,7 @@ class DampedVerlet(MolecularDynamics):
         p_gone = p[gone].sum(axis=0)
         cd = isinstance(self.calc, ClusterDynamics)
         lost = None
-        if cd and not atoms.constraints and self._own_forces:
+        if cd and not atoms.constraints and self._own_forces and not self.terms:
             # the step's forces less the pairs of the removed particles: no pass over the rest
             lost = self.calc.pairs_touching(atoms, out, forces=self.forces, damped=self._eta is not None)
         incremental = lost is not None
@@ -736,7 +757,11 @@ class DampedVerlet(MolecularDynamics):
                          "removed_kinetic": self.removed["kinetic"], "removed_potential": self.removed["potential"],
                          "removed_px": float(self.removed["momentum"][0]),
                          "removed_py": float(self.removed["momentum"][1]),
-                         "removed_pz": float(self.removed["momentum"][2])}
+                         "removed_pz": float(self.removed["momentum"][2]),
+                         "term_dissipated": self._term_dissipated()}
+
+    def _term_dissipated(self):
+        return float(sum(t.dissipated for t in self.terms))
 
     def _drive_sum(self, name):
         return float(sum(getattr(d, name, 0.0) for d in self._drives()))
@@ -767,12 +792,16 @@ class DampedVerlet(MolecularDynamics):
         rk = self.removed["kinetic"] - L0.get("removed_kinetic", 0.0)
         ru = self.removed["potential"] - L0.get("removed_potential", 0.0)
         rp = self.removed["momentum"] - np.array([L0.get("removed_p" + a, 0.0) for a in "xyz"])
+        td = self._term_dissipated() - L0.get("term_dissipated", 0.0)
         change = K + U - L0["kinetic"] - L0["potential"]
-        return {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
+        out = {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
                 "drive_work": work, "layer_kinetic": layers, "damping_loss": loss, "wall_dissipated": diss,
                 "removed_kinetic": rk, "removed_potential": ru, "removed_momentum": rp,
                 "energy_in": L0["kinetic"] + abs(work),
-                "residual": change - (work + layers - loss - diss - rk - ru)}
+                "residual": change - (work + layers - loss - diss - rk - ru - td)}
+        if self.terms:
+            out["term_dissipated"] = td
+        return out
 
     # -- checkpoint state (files: clusterdyn.io.checkpoint.save_run / load_run) ----------------
     def get_state(self, copy=True):
@@ -793,6 +822,8 @@ class DampedVerlet(MolecularDynamics):
             st["sort_interval"] = self.sort_interval
         if self._ledger0 is not None:
             st["ledger0"] = dict(self._ledger0)
+        if self.terms:            # HOOK: the terms' history
+            st["terms"] = {t.name: t.get_state() for t in self.terms}
         if nl is not None and nl.ref_nc is not None:
             if getattr(nl, "compacted", False):
                 # a list compacted by removals keeps the old build's row order, not the order a
@@ -833,6 +864,14 @@ class DampedVerlet(MolecularDynamics):
                                  hint="a restart keeps the run's sort interval")
         if "ledger0" in st:
             self._ledger0 = {k: float(x) for k, x in st["ledger0"].items()}
+        if "terms" in st:         # HOOK: the terms' history (terms not attached yet are rebuilt)
+            from .boundary import BoundaryTerm
+            have = {t.name: t for t in self.terms}
+            for name, ts in st["terms"].items():
+                if name in have:
+                    have[name].set_state(ts)
+                elif ts.get("kind") == "BoundaryTerm":
+                    self.attach(BoundaryTerm.from_state(ts))
         nl = getattr(self.calc, "nl", None)
         if nl is not None and "nl_ref" in st:
             nl.build(np.asarray(st["nl_ref"]), self.atoms.cell.array, self.atoms.pbc)
