@@ -24,7 +24,7 @@ on the softening branch.  A pair with ``kappa >= delta_f`` has failed: no
 cohesion ever again (friction stays, while the pair is in contact).  The
 history (kappa, lambda, the tangential displacement) is the dynamics' state:
 :class:`BoundaryTerm` is attached to a :class:`~clusterdyn.md.DampedVerlet`
-(:meth:`~clusterdyn.md.DampedVerlet.attach`), which calls it once per force
+(:meth:`~clusterdyn.md.DampedVerlet.attach_term`), which calls it once per force
 pass and stores its state in checkpoints.
 
 Areas: ``A_b = r0^2/(2 sqrt 2)`` turns a bond force into a stress (a dense fcc
@@ -337,7 +337,7 @@ def apply_boundary_law(atoms, law, rc=None, within="grain"):
     grain (``within`` labels; ``law.select == "all"``: on no pair), makes a
     :class:`~clusterdyn.calculators.ClusterDynamics` with ``attraction="initial"`` (so
     every other pair only repels) and the :class:`BoundaryTerm` over the other set-up
-    pairs.  Attach the term to the dynamics: ``dyn.attach(term)``.  ``atoms.calc`` is set.
+    pairs.  Attach the term to the dynamics: ``dyn.attach_term(term)``.  ``atoms.calc`` is set.
     """
     from ..calculators import ClusterDynamics
     from ..potentials import DEFAULT_RC
@@ -381,7 +381,7 @@ class BoundaryTerm:
     """The boundary law over a fixed list of bonds, with its history (see the module docstring).
 
     Made by :func:`apply_boundary_law`; attached to a dynamics with
-    ``dyn.attach(term)``.  Attributes: ``law``, ``bonds`` ((M, 2) particle ids),
+    ``dyn.attach_term(term)``.  Attributes: ``law``, ``bonds`` ((M, 2) particle ids),
     ``kappa``, ``lam`` ((M,) history), ``s`` ((M, 3) tangential displacement),
     ``slip_dissipated`` (eV since the start: damage and slip, :attr:`dissipated`), ``energy`` (stored energy of the last pass, eV),
     ``virial`` ((6,) eV of the last pass).

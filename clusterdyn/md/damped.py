@@ -272,11 +272,11 @@ class DampedVerlet(MolecularDynamics):
         self._dissipation = 0.0
         self._ledger0 = None
         #: HOOK (boundary law, docs/theory.md 1.11): force terms with a history, attached with
-        #: :meth:`attach`, evaluated once per force pass; none by default (nothing runs)
+        #: :meth:`attach_term`, evaluated once per force pass; none by default (nothing runs)
         self.terms = []
         self._drives()
 
-    def attach(self, term):
+    def attach_term(self, term):
         """HOOK: add a force term with its own history (e.g. :class:`clusterdyn.md.boundary.BoundaryTerm`).
 
         It is evaluated in every force pass (in the step's pass, with the half-step momenta
@@ -871,7 +871,7 @@ class DampedVerlet(MolecularDynamics):
                 if name in have:
                     have[name].set_state(ts)
                 elif ts.get("kind") == "BoundaryTerm":
-                    self.attach(BoundaryTerm.from_state(ts))
+                    self.attach_term(BoundaryTerm.from_state(ts))
         nl = getattr(self.calc, "nl", None)
         if nl is not None and "nl_ref" in st:
             nl.build(np.asarray(st["nl_ref"]), self.atoms.cell.array, self.atoms.pbc)

@@ -83,7 +83,7 @@ def test_forces_are_the_energy_gradient_at_fixed_history(stretch):
     atoms.positions += rng.normal(0, 0.01 * R0, atoms.positions.shape)
     atoms.set_momenta(rng.normal(0, 1, atoms.positions.shape) * atoms.get_masses()[:, None] * 50 * units.m_s)
     dyn = DampedVerlet(atoms, timestep=0.05 * R0 / (5 * units.km_s), J=None)
-    dyn.attach(term)
+    dyn.attach_term(term)
     dyn.run(5)       # history: tangential displacements and some damage
     f = term.forces(atoms, mode=FROZEN)
     assert np.abs(f.sum(axis=0)).max() <= 1e-12 * np.abs(f).max()       # momentum
@@ -142,7 +142,7 @@ def test_restart_bit_for_bit_with_history(tmp_path):
         rng = np.random.default_rng(5)
         atoms.set_momenta(rng.normal(0, 1, atoms.positions.shape) * atoms.get_masses()[:, None] * 30 * units.m_s)
         dyn = DampedVerlet(atoms, J=50)
-        dyn.attach(term)
+        dyn.attach_term(term)
         return atoms, dyn, term
     atoms, dyn, term = start()
     dyn.run(30)
@@ -166,7 +166,7 @@ def test_ledger_closes_with_damage():
     atoms, calc, term = _cube(BoundaryLaw(sigma_t=1.0 * units.GPa, G_c=2000 * J_M2), seed=6)
     atoms.set_cell(atoms.cell.array * 1.005, scale_atoms=True)
     dyn = DampedVerlet(atoms, J=50)
-    dyn.attach(term)
+    dyn.attach_term(term)
     dyn.start_ledger()
     dyn.run(200)
     led = dyn.energy_ledger()
