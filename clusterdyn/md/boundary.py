@@ -8,7 +8,8 @@ boundaries within the cutoff at set-up; optionally every set-up pair) get
   ``attraction="initial"`` rule: these pairs are not in ``bonds0``, so the
   CD pair loop gives them the repulsive branch only), plus
 - a **cohesive part** (this module), acting for ``r > r0_ab``: a bilinear
-  traction-separation law of the normal opening ``delta = r - r0_ab`` with the
+  traction-separation law of the normal opening ``delta = r - r_b`` (``r_b`` =
+  r0_ab, or the set-up distance of a pair set up beyond it: no bond starts loaded) with the
   CD bond's own stiffness ``k_n = -f'(r0_ab)`` up to the peak force
   ``F_t = sigma_t A_b``, then linear softening to zero at ``delta_f = 2 W_b /
   F_t`` (``W_b = G_c r0^2/4``); a damaged bond unloads toward the origin; and
@@ -150,7 +151,7 @@ def _row_map(ids, out):
 
 
 @njit(cache=True)
-def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, kn, kt, ft, fs, mu, d0, df,
+def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, rest, kn, kt, ft, fs, mu, d0, df,
                     ftab, tinv, kappa, lam, s, mode, dt, shear, fb, rb, vir):
     """The force on particle i of every bond into ``fb`` ((M, 3); j gets minus it) and the bond's
     rows into ``rb`` ((M, 2), -1 for a bond that lost a particle: :func:`scatter` adds them);
@@ -196,7 +197,7 @@ def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, kn, kt
         nx = dx / r
         ny = dy / r
         nz = dz / r
-        delta = r - r0[b]
+        delta = r - rest[b]
         k = kn[b]
         # damage from kappa = max over time of (opening + slip)
         kap = kappa[b]
@@ -256,7 +257,7 @@ def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, kn, kt
                 sz += (vz - vn * nz) * dt
             # the cap: cohesion (removed by the damage) + Coulomb friction on the CD contact force
             nc = 0.0
-            if delta < 0.0:
+            if r < r0[b]:
                 ti = btype[b]
                 xg = (r / r0[b] - TABLE_LO) * tinv
                 kg = int(xg)
@@ -373,7 +374,7 @@ def apply_boundary_law(atoms, law, rc=None, within="grain"):
     atoms.new_array("bonds0", bonds)
     atoms.calc = calc
     calc.setup(atoms)
-    term = BoundaryTerm.from_pairs(calc, atoms, law, i[~inside], j[~inside])
+    term = BoundaryTerm.from_pairs(calc, atoms, law, i[~inside], j[~inside], r[~inside])
     return calc, term
 
 
@@ -389,12 +390,13 @@ class BoundaryTerm:
 
     name = "boundary"
 
-    def __init__(self, law, bonds, btype, r0, kn, ftab):
+    def __init__(self, law, bonds, btype, r0, kn, ftab, rest=None):
         self.law = law
         self.bonds = np.ascontiguousarray(bonds, np.int64).reshape(-1, 2)
         m = self.bonds.shape[0]
         self.btype = np.ascontiguousarray(btype, np.int64)
-        self.r0 = np.ascontiguousarray(r0, float)
+        self.r0 = np.ascontiguousarray(r0, float)          # r0_ab
+        self.rest = self.r0.copy() if rest is None else np.ascontiguousarray(rest, float)
         self.kn = np.ascontiguousarray(kn, float)
         self.ftab = np.ascontiguousarray(ftab, float)
         self.ft, self.fs, self.d0, self.df = (np.ascontiguousarray(a, float) for a in law.bond_constants(self.r0, self.kn))
@@ -415,11 +417,16 @@ class BoundaryTerm:
         self._fb = np.zeros((0, 3))
         self._rb = np.zeros((0, 2), np.int64)
         self.nfailed = 0
+        #: True: the bonds are elastic springs (no damage, no slip, no history advanced): a
+        #: quench of the packing with its bonds intact (set back to False before the run)
+        self.hold = False
         self.tinv = (TABLE_N - 1) / (1.0 - TABLE_LO)
 
     @classmethod
-    def from_pairs(cls, calc, atoms, law, i, j):
-        """The term over the pairs (rows i, j of ``atoms`` now) with the calculator's pair laws."""
+    def from_pairs(cls, calc, atoms, law, i, j, r=None):
+        """The term over the pairs (rows i, j of ``atoms`` now) with the calculator's pair laws.
+        ``r``: their set-up distances; a pair set up beyond r0_ab has its cohesive part's rest
+        length there (no bond starts loaded)."""
         types = calc._check_types(atoms)
         nt = len(calc.potentials)
         ta, tb = types[i], types[j]
@@ -442,7 +449,8 @@ class BoundaryTerm:
                 ftab[t] = np.maximum(np.asarray(law_ab.force(rr), float), 0.0)
         ids = atoms.arrays["id"]
         bonds = np.stack([ids[i], ids[j]], axis=1) if len(i) else np.zeros((0, 2), np.int64)
-        return cls(law, bonds, btype, r0t[btype], knt[btype], ftab)
+        rest = r0t[btype] if r is None else np.maximum(r0t[btype], np.asarray(r, float))
+        return cls(law, bonds, btype, r0t[btype], knt[btype], ftab, rest=rest)
 
     # -- the force pass ----------------------------------------------------------------------
     def _rows(self, atoms):
@@ -476,8 +484,10 @@ class BoundaryTerm:
         if self._fb.shape[0] != m:
             self._fb = np.zeros((m, 3))
             self._rb = np.full((m, 2), -1, np.int64)
+        if self.hold:
+            mode = FROZEN
         e, slip, nfail = boundary_kernel(x, p, invm, cell, icell, pbc, self._rows(atoms), self.bonds[:, 0],
-                                         self.bonds[:, 1], self.btype, self.r0, self.kn, self.kt, self.ft, self.fs,
+                                         self.bonds[:, 1], self.btype, self.r0, self.rest, self.kn, self.kt, self.ft, self.fs,
                                          self.law.mu, self.d0, self.df, self.ftab, self.tinv, self.kappa, self.lam,
                                          self.s, mode, float(dt), self.law.shear, self._fb, self._rb, vir)
         self.slip_dissipated += slip
@@ -523,7 +533,7 @@ class BoundaryTerm:
     # -- checkpoints ---------------------------------------------------------------------------
     def get_state(self):
         return {"kind": "BoundaryTerm", "law": self.law.todict(), "bonds": self.bonds.copy(),
-                "btype": self.btype.copy(), "r0": self.r0.copy(), "kn": self.kn.copy(), "ftab": self.ftab.copy(),
+                "btype": self.btype.copy(), "r0": self.r0.copy(), "rest": self.rest.copy(), "kn": self.kn.copy(), "ftab": self.ftab.copy(),
                 "kappa": self.kappa.copy(), "lam": self.lam.copy(), "s": self.s.copy(),
                 "slip_dissipated": float(self.slip_dissipated)}
 
@@ -539,6 +549,6 @@ class BoundaryTerm:
     def from_state(cls, st):
         d = dict(st["law"])
         d["select"] = str(d["select"])
-        t = cls(BoundaryLaw.fromdict(d), st["bonds"], st["btype"], st["r0"], st["kn"], st["ftab"])
+        t = cls(BoundaryLaw.fromdict(d), st["bonds"], st["btype"], st["r0"], st["kn"], st["ftab"], rest=st["rest"])
         t.set_state(st)
         return t

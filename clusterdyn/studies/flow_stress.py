@@ -94,7 +94,7 @@ def _sample(mat, r0, size, sample, grain_size, porosity, d_min, seed):
 def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrystal", grain_size=11.0,
                    porosity=0.14, d_min=0.85, rc=1.15, boundaries="bonded", strains=(0.05, 0.10, 0.15),
                    rate=1e-3, hold=30.0, average=10.0, dt=0.1, J=50.0, noise=10 * units.m_s, seed=1,
-                   relax_cycles=12, axis=0, record_every=0.5, window=0.01, progress=False):
+                   relax_cycles=12, axis=0, record_every=0.5, window=0.01, progress=False, law=None, tension=False):
     """Uniaxial-strain test of a periodic cube of clusters (the module docstring has the steps).
 
     Parameters
@@ -141,6 +141,12 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
         Compression axis (0, 1, 2).
     progress : bool
         A tqdm bar over the steps.
+    law : dict or BoundaryLaw, optional
+        The boundary pair law (:mod:`clusterdyn.md.boundary`; a dict in display units:
+        sigma_t and tau_c in GPa, G_c in J/m^2, mu, select); replaces ``boundaries``.
+    tension : bool
+        Stretch instead of compress (uniaxial strain); ``spall_strength`` is then the largest
+        tensile ``sigma_axial`` (the material point's spall strength at this rate).
 
     Returns
     -------
@@ -192,7 +198,17 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
         raise InputError("grain_size", grain_size, f"a grain no larger than the cube ({size:g} r0)")
 
     atoms, report = _sample(mat, r0, size, sample, grain_size, porosity, d_min, seed)
-    if sample == "polycrystal" and boundaries == "repulsive":
+    term = None
+    if law is not None:
+        from ..md.boundary import BoundaryLaw
+        if not isinstance(law, BoundaryLaw):
+            law = BoundaryLaw.fromdict(law, display=True)
+        # the law on the packing as built, quenched with its bonds held elastic (no damage), then
+        # released: a bond whose quenched tension exceeds its strength fails in the first steps
+        from ..md.boundary import apply_boundary_law
+        calc, term = apply_boundary_law(atoms, law, rc=rc)
+        term.hold = True
+    elif sample == "polycrystal" and boundaries == "repulsive":
         mark_initial_bonds(atoms, rc=rc, within="grain")
         calc = ClusterDynamics(rc=rc, attraction="initial")
     else:
@@ -200,15 +216,25 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     atoms.calc = calc
     calc.setup(atoms)
     pot = calc.potentials[0]
+    relaxed_bonds = None
+
     tau = pot.r0 / pot.c0
     relax = {}
     if sample == "polycrystal" and relax_cycles:
-        rr = relax_sample(atoms, cycles=relax_cycles, axes=(0, 1, 2))
+        rr = relax_sample(atoms, cycles=relax_cycles, axes=(0, 1, 2), term=term)
         relax = {"stress": (np.asarray(rr["stress"]) / units.GPa).tolist(),
                  "min_r_over_r0": rr["min_r_over_r0"], "steps": rr["steps"]}
+    if law is not None:
+        term.hold = False
+        f = np.zeros((len(atoms), 3))
+        term.add_forces(atoms, f)            # the damage of the quenched openings (not dissipated)
+        relax["boundary"] = term.summary()
+        report = dict(report, porosity_quenched=float(1 - len(atoms) * pot.r0 ** 3 / (SQRT2 * atoms.get_volume())))
     atoms.set_momenta(np.zeros((len(atoms), 3)))
     thermal_noise(atoms, noise, seed)
     dyn = DampedVerlet(atoms, timestep=dt * tau, J=J)
+    if term is not None:
+        dyn.attach_term(term)
     every = max(1, int(round(record_every / dt)))
     L0 = atoms.cell[axis, axis]
     eps_max = strains[-1]
@@ -220,7 +246,14 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     def record():
         t_series.append(dyn.get_time() / tau)
         e_series.append(eps_now)
-        s_series.append(cell_stress(atoms) / units.GPa)
+        W = None
+        if term is not None:
+            from ..analysis.stress import particle_virials
+            if dyn.forces is None:
+                dyn._refresh_properties()
+            W = particle_virials(atoms)
+            W[0] += term.virial            # the bonds' virial (its sum is what the cell stress needs)
+        s_series.append(cell_stress(atoms, W) / units.GPa)
 
     bar = None
     if progress:
@@ -230,7 +263,7 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     for i in range(1, n_ramp + 1):
         eps_now = eps_max * i / n_ramp
         f = np.ones(3)
-        f[axis] = L0 * (1.0 - eps_now) / atoms.cell[axis, axis]
+        f[axis] = L0 * (1.0 + eps_now if tension else 1.0 - eps_now) / atoms.cell[axis, axis]
         atoms.set_cell(atoms.cell.array * f[:, None], scale_atoms=True)
         dyn.forces = None                 # positions moved outside the step
         dyn.run(1)
@@ -275,7 +308,11 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
             "rest_stress": S[0].tolist(),
             "series": {"t_tau": T.tolist(), "strain": E.tolist(), "stress": S.tolist()},
             "sample": report, "relax": relax, "n_clusters": len(atoms), "n_steps": int(dyn.nsteps),
-            "tau_ns": tau / units.ns, "axis": axis, "wall_time_s": time.perf_counter() - t_start}
+            "tau_ns": tau / units.ns, "axis": axis, "wall_time_s": time.perf_counter() - t_start,
+            "tension": bool(tension), "spall_strength": float(S[:, axis].max()) if tension else None,
+            "modulus_axial": float(-(S[:, axis][on_ramp] - S[0, axis])[1:4].mean()
+                                   / np.maximum(E[on_ramp][1:4], 1e-12).mean()) if on_ramp.sum() > 4 else None,
+            "boundary": term.summary() if term is not None else None}
 
 
 # --------------------------------------------------------------------------- one run, as a cached "scene"
