@@ -624,8 +624,12 @@ def _summary(r):
 # --------------------------------------------------------------------------- polycrystal shock (D-u)
 def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
                             length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
-                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12):
+                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12,
+                            packing=None):
     """Piston shock set-up at ``u`` in a relaxed polycrystal (or a [100] single crystal).
+
+    ``packing`` (polycrystal; :mod:`clusterdyn.scenes.packing`): grain size, porosity and boundaries
+    from a preset or file (the boundary law's term attached to the dynamics).
 
     The block (``length`` x ``width`` x ``width`` r0, periodic across) is
     relaxed (:func:`relax_sample`) and a 1.5 r0 layer at x-min becomes the
@@ -639,6 +643,11 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     mat = get_material(material)
     a = SQRT2 * r0
     W = max(2, int(round(width / SQRT2))) * a
+    spec = None
+    if packing is not None and sample != "single":
+        from .packing import resolve_packing
+        spec = resolve_packing(packing)
+        grain_size, porosity = spec["grain_size"], spec["porosity"]
     if sample == "single":
         atoms = fcc_packing(mat, r0, direction="100", shape=Plate(length * r0, W, axis=0),
                             pbc=(False, True, True))
@@ -648,9 +657,15 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
                             pbc=(False, True, True), d_min=d_min, target_porosity=porosity)
         report = atoms.info["polycrystal"]
     atoms.set_cell([(length + 40) * r0, W, W])
-    calc = ClusterDynamics()
-    atoms.calc = calc
-    relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
+    term = None
+    if spec is not None:
+        from .packing import prepare
+        calc, term, relax = prepare(atoms, spec, 1.15, (lambda at, t: relax_sample(at, cycles=relax_cycles, term=t))
+                                    if relax_cycles else None)
+    else:
+        calc = ClusterDynamics()
+        atoms.calc = calc
+        relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
     atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 2 * r0
     calc.setup(atoms)
     pot = calc.potentials[0]
@@ -660,6 +675,8 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     atoms.set_momenta(atoms.get_momenta())
     dt = dt_factor * r0 / (pot.c0 + u)
     dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    if term is not None:
+        dyn.attach_term(term)
     L = np.ptp(atoms.positions[:, 0])
     rho0 = atoms.get_masses().sum() / ((L + a / 2) * W * W)
     try:
@@ -682,6 +699,8 @@ SHOCK_PARAMS = [
     Param("seed", 1, "random seed", kind="int", low=0),
     Param("single", True, "also run a [100] single crystal for comparison", kind="bool"),
     Param("frames", 40, "profiles recorded over the run", kind="int", low=5),
+    Param("packing", None, "a packing preset or JSON file (clusterdyn.scenes.packing: grain size, porosity, "
+          "boundaries); none = porosity and grain_size above", kind="str", optional=True),
 ]
 
 
@@ -699,7 +718,7 @@ class PolycrystalShockScene(SceneDef):
     def setup(self, v, stage):
         s, extra = polycrystal_shock_setup(v["u"], "polycrystal" if stage == "pc" else "single", r0=v["r0"],
                                            length=v["length"], width=v["width"], grain_size=v["grain_size"],
-                                           porosity=v["porosity"], seed=v["seed"])
+                                           porosity=v["porosity"], seed=v["seed"], packing=v["packing"])
         info = shock_info(s)
         info.update(extra)
         return s.atoms, s.dyn, info
