@@ -8,7 +8,8 @@ to the targets they name (docs/polycrystal.md, "Calibrated packings").
 :func:`prepare` gives a built polycrystal its calculator (and the law's term): with the law,
 the bonds are marked on the packing as built, the packing is quenched with them held elastic
 (:attr:`~clusterdyn.md.boundary.BoundaryTerm.hold`), then released, so a bond whose quenched
-tension exceeds its strength fails at once (counted in the report).  The scene attaches the
+tension exceeds its strength fails at once (counted in the report), and quenched again with
+the law as it is (bonds may fail: the packing settles to rest).  The scene attaches the
 term to its dynamics: ``dyn.attach_term(term)``.
 """
 
@@ -68,5 +69,8 @@ def prepare(atoms, spec, rc, relax=None):
         term.hold = False
         import numpy as np
         term.add_forces(atoms, np.zeros((len(atoms), 3)))     # the quenched openings' damage, stored
-        report = dict(report or {}, boundary=term.summary())
+        report = dict(report or {}, boundary_at_release=term.summary())
+        if relax is not None:               # released: quenched again with the law as it is
+            report["released"] = relax(atoms, term)
+        report["boundary"] = term.summary()
     return calc, term, report

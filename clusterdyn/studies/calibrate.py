@@ -6,13 +6,12 @@ targets, not predicted.  For each candidate packing (the law on the pairs across
 or on every pair, ``selects``, times the tensile strengths ``sigma_ts``) it runs the material-point
 tests of :func:`clusterdyn.studies.flow_stress.material_point` on a periodic cube:
 
-- ``unconfined``: uniaxial stress (lateral axes rescaled toward zero stress), compressed to
-  ``strains_unconfined[-1]`` and held: **flow_stress** = the relaxed von Mises intensity (a metal's
-  flow stress is measured so: 6061-T6 0.3 GPa), and Young's modulus from the first 0.5% of the
-  ramp;
+- ``unconfined``: uniaxial stress (lateral axes rescaled toward zero stress), compressed to 8%
+  and held: **flow_stress** = the relaxed von Mises intensity (a metal's flow stress is measured
+  so: 6061-T6 0.3 GPa), and Young's modulus E (a line through the ramp up to 2%);
 - ``tension``: uniaxial strain, stretched: **spall_strength** = the largest tensile axial stress;
 - ``confined`` (``confined=true``): uniaxial strain compressed to 15% (the flow-stress study's
-  definition): **confined_flow**, and the longitudinal modulus.
+  definition): **confined_flow**, and the longitudinal modulus M (a line up to 5%).
 
 The fracture energy of each candidate follows from the ``ductility`` ratio ``delta_f / delta_0``
 of the law (``G_c = ductility F_t^2 / (2 k_n A_w)``, r0-dependent: stated per candidate).  The
@@ -94,6 +93,19 @@ def g_c_for(material, r0, sigma_t, ductility):
     return wb / (r0 ** 2 / 4) / (units.J / units.m ** 2)
 
 
+def secant_modulus(extra, upto):
+    """Slope (GPa) of a straight line through the ramp's -sigma_axial against the strain up to
+    ``upto`` (the first reading): Young's modulus of the unconfined test, the longitudinal one of
+    the confined test.  (The first 0.5% alone is dominated by the quenched packing's settling.)"""
+    ser = extra["series"]
+    e = np.asarray(ser["strain"])
+    s = -np.asarray(ser["stress"])[:, int(extra.get("axis", 0))]
+    sel = (e > 0) & (e <= upto + 1e-12)
+    if sel.sum() < 3:
+        return float("nan")
+    return float(np.polyfit(e[sel], s[sel], 1)[0])
+
+
 def _candidates(v, mat):
     sel = [x.strip() for x in str(v["selects"]).split(",") if x.strip()]
     if not sel or any(x not in ("all", "boundary") for x in sel):
@@ -141,12 +153,12 @@ def _measure(v, label, law, cache, tests, bar, spec=None):
             x = res.extra
             if test == "unconfined":
                 vals["flow_stress"].append(x["flow_stress"])
-                vals["E_young"].append(x["modulus_axial"])
+                vals["E_young"].append(secant_modulus(x, TEST_SETTINGS[test]["strains"][0]))
             elif test == "tension":
                 vals["spall_strength"].append(x["spall_strength"])
             else:
                 vals["confined_flow"].append(x["flow_stress"])
-                vals["M_long"].append(x["modulus_axial"])
+                vals["M_long"].append(secant_modulus(x, TEST_SETTINGS[test]["strains"][0]))
             b = (x.get("relax") or {}).get("boundary")
             if b and test == "tension":
                 vals["failed_at_release"].append(b["failed"] / max(1, b["bonds"]))
