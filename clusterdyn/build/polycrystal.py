@@ -472,6 +472,15 @@ PACKINGS = {
               "description": "the CD paper's Taylor-rod packing (14% porosity, grains of 11 r0 at r0 = 100 um)"},
     "repulsive": {"grain_size": 5.0, "porosity": 0.20, "rc": 1.10, "boundaries": "repulsive",
                   "description": "the flow-stress study's lowest packing: cohesionless grain boundaries"},
+    # CALIBRATED (tuned): clusterdyn study calibrate --set flow_stress=0.3GPa --set selects=all
+    # --set sigma_ts=2,4,8,16 (cube 16 r0, r0 = 100 um, seed 1; docs/polycrystal.md)
+    "6061-T6": {"grain_size": 5.0, "porosity": 0.14, "rc": 1.15, "boundaries": "law", "material": "Al-6061-T6",
+                "law": {"sigma_t": 2.928, "G_c": 21781.5, "tau_c": 0.0, "mu": 0.0, "select": "all"},
+                "description": "6061-T6, calibrated (tuned) to its flow stress 0.3 GPa (unconfined); its spall "
+                               "strength is far below the metal's (no packing of the law reaches both)",
+                "targets": {"flow_stress": 0.3}, "calibrated": True,
+                "achieved": {"flow_stress": 0.271, "spall_strength": 0.175, "confined_flow": 0.446,
+                             "E_young": 10.5, "M_long": 14.4}},
 }
 
 #: keys of a packing and the allowed boundary kinds

@@ -66,6 +66,10 @@ PARAMS = [
     Param("mu", 0.0, "Coulomb friction of the law", low=0.0),
     Param("tau_c", 0.0, "cohesive shear strength of the law", unit="GPa", low=0.0),
     Param("confined", True, "also the confined test (15% uniaxial strain; the longest run)", kind="bool"),
+    Param("unconfined", True, "the unconfined test (the flow stress); false: only what the targets need",
+          kind="bool"),
+    Param("relax_cycles", 12, "quench cycles of 100 damped steps (held, then a third of them released)",
+          kind="int", low=1),
     Param("reference", True, "also the packing without the law (bonded boundaries, the paper's rule)",
           kind="bool"),
     Param("refine", True, "run the interpolated best sigma_t of every select", kind="bool"),
@@ -121,6 +125,8 @@ def _law(v, select, sigma_t, mat):
 def _overrides(v, law, test, seed, spec=None):
     ov = {"material": v["material"], "r0": v["r0"] / units.um, "size": v["size"], "grain_size": v["grain_size"],
           "porosity": v["porosity"], "rc": v["rc"], "seed": seed, "test": test, **TEST_SETTINGS[test]}
+    if v["relax_cycles"] != 12:
+        ov["relax_cycles"] = v["relax_cycles"]
     if spec is not None:
         ov.update(grain_size=spec["grain_size"], porosity=spec["porosity"], rc=spec["rc"])
         if spec["boundaries"] in ("bonded", "repulsive"):
@@ -214,7 +220,11 @@ def calibrate_study(overrides=None, out=None, progress=True, quiet=None):
     if spec is None and not targets:
         raise InputError("flow_stress", None, "at least one target (flow_stress, spall_strength, confined_flow) "
                          "or a packing to measure")
-    tests = ["unconfined", "tension"] + (["confined"] if v["confined"] else [])
+    tests = (["unconfined"] if v["unconfined"] else []) + ["tension"] + (["confined"] if v["confined"] else [])
+    if "flow_stress" in targets and not v["unconfined"]:
+        raise InputError("unconfined", False, "true with a flow_stress target (the unconfined test measures it)")
+    if "confined_flow" in targets and not v["confined"]:
+        raise InputError("confined", False, "true with a confined_flow target")
     folder = out_folder(out, "calibrate", v["material"])
     cache = folder / "runs"
     cands = [] if spec is not None else _candidates(v, mat)
