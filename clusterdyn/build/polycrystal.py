@@ -463,8 +463,8 @@ def polycrystal_summary(atoms):
 #: ``grain_size`` in r0 (the equal-volume diameter), ``porosity`` the target of the builder,
 #: ``rc`` in r0, ``boundaries`` "bonded" (the CD paper's: boundary pairs attract like any pair),
 #: "repulsive" (set-up bonds inside grains only) or "law" (the boundary pair law of
-#: clusterdyn.md.boundary with the parameters ``law``: sigma_t and tau_c in GPa, G_c in J/m^2, mu,
-#: select).  "paper" is the default and the CD paper's packing.  Material presets are
+#: clusterdyn.md.boundary with the parameters ``law``: sigma_t and tau_c in GPa, G_c in J/m^2 or
+#: ductility = delta_f/delta_0 (the same response at every r0), mu, select).  "paper" is the default and the CD paper's packing.  Material presets are
 #: CALIBRATED: their law parameters were tuned (``clusterdyn study calibrate``) to the targets
 #: they name; ``achieved`` gives what the material-point tests measured (docs/polycrystal.md).
 PACKINGS = {
@@ -475,7 +475,7 @@ PACKINGS = {
     # CALIBRATED (tuned): clusterdyn study calibrate --set flow_stress=0.3GPa --set selects=all
     # --set sigma_ts=2,4,8,16 (cube 16 r0, r0 = 100 um, seed 1; docs/polycrystal.md)
     "6061-T6": {"grain_size": 5.0, "porosity": 0.14, "rc": 1.15, "boundaries": "law", "material": "Al-6061-T6",
-                "law": {"sigma_t": 2.928, "G_c": 21781.5, "tau_c": 0.0, "mu": 0.0, "select": "all"},
+                "law": {"sigma_t": 2.928, "ductility": 8.0, "tau_c": 0.0, "mu": 0.0, "select": "all"},
                 "description": "6061-T6, calibrated (tuned) to its flow stress 0.3 GPa (unconfined); its spall "
                                "strength is far below the metal's (no packing of the law reaches both)",
                 "targets": {"flow_stress": 0.3}, "calibrated": True,
@@ -530,8 +530,7 @@ def packing_spec(packing):
         raise InputError(f"{where}: boundaries", spec.get("boundaries"), " or ".join(BOUNDARY_KINDS))
     if spec["boundaries"] == "law":
         law = spec.get("law")
-        need = ("sigma_t", "G_c")
-        if not isinstance(law, dict) or any(k not in law for k in need):
-            raise InputError(f"{where}: law", law, "a dict with sigma_t (GPa) and G_c (J/m^2), optionally "
-                             "tau_c (GPa), mu, kt_ratio, select")
+        if not isinstance(law, dict) or "sigma_t" not in law or (("G_c" in law) == ("ductility" in law)):
+            raise InputError(f"{where}: law", law, "a dict with sigma_t (GPa) and G_c (J/m^2) or ductility "
+                             "(delta_f/delta_0), optionally tau_c (GPa), mu, kt_ratio, select")
     return spec

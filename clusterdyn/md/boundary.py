@@ -70,7 +70,11 @@ class BoundaryLaw:
         Tensile strength of a bond, as a stress (``F_t = sigma_t r0^2/(2 sqrt 2)``), > 0.
     G_c : float
         Fracture energy per area (``W_b = G_c r0^2/4`` per bond), > 0, eV/Angstrom^2
-        (``units.J / units.m**2`` is 1 J/m^2).
+        (``units.J / units.m**2`` is 1 J/m^2).  Or, instead:
+    ductility : float
+        ``delta_f / delta_0`` (> 1): the softening ends at this multiple of the peak's opening, at
+        every r0 (a packing calibrated so responds the same at any resolution; its G_c then
+        scales with r0).
     tau_c : float, default 0
         Cohesive shear strength, as a stress (``F_s = tau_c r0^2/(2 sqrt 2)``), >= 0.
     mu : float, default 0
@@ -83,11 +87,16 @@ class BoundaryLaw:
         within the cutoff (the lattice's own attraction then comes from this law only).
     """
 
-    FIELDS = ("sigma_t", "G_c", "tau_c", "mu", "kt_ratio", "select")
+    FIELDS = ("sigma_t", "G_c", "tau_c", "mu", "kt_ratio", "select", "ductility")
 
-    def __init__(self, sigma_t, G_c, tau_c=0.0, mu=0.0, kt_ratio=1.0, select="boundary"):
+    def __init__(self, sigma_t, G_c=None, tau_c=0.0, mu=0.0, kt_ratio=1.0, select="boundary", ductility=None):
         self.sigma_t = _positive("sigma_t", sigma_t)
-        self.G_c = _positive("G_c", G_c)
+        if (G_c is None) == (ductility is None):
+            raise InputError("G_c", G_c, "a fracture energy G_c or a ductility delta_f/delta_0 (one of the two)")
+        self.G_c = None if G_c is None else _positive("G_c", G_c)
+        self.ductility = None if ductility is None else _positive("ductility", ductility)
+        if self.ductility is not None and self.ductility <= 1:
+            raise InputError("ductility", ductility, "delta_f/delta_0 > 1")
         self.tau_c = _positive("tau_c", tau_c, zero=True)
         self.mu = _positive("mu", mu, zero=True)
         self.kt_ratio = _positive("kt_ratio", kt_ratio)
@@ -105,15 +114,17 @@ class BoundaryLaw:
         """The parameters; ``display=True``: stresses in GPa, G_c in J/m^2."""
         d = {k: getattr(self, k) for k in self.FIELDS}
         if display:
-            d.update(sigma_t=self.sigma_t / units.GPa, tau_c=self.tau_c / units.GPa, G_c=self.G_c / J_M2)
-        return d
+            d.update(sigma_t=self.sigma_t / units.GPa, tau_c=self.tau_c / units.GPa,
+                     G_c=None if self.G_c is None else self.G_c / J_M2)
+        return {k: x for k, x in d.items() if x is not None}
 
     @classmethod
     def fromdict(cls, d, display=False):
         d = dict(d)
         if display:
-            d.update(sigma_t=float(d["sigma_t"]) * units.GPa, tau_c=float(d.get("tau_c", 0.0)) * units.GPa,
-                     G_c=float(d["G_c"]) * J_M2)
+            d.update(sigma_t=float(d["sigma_t"]) * units.GPa, tau_c=float(d.get("tau_c", 0.0)) * units.GPa)
+            if d.get("G_c") is not None:
+                d["G_c"] = float(d["G_c"]) * J_M2
         return cls(**{k: d[k] for k in cls.FIELDS if k in d})
 
     def bond_constants(self, r0, kn):
@@ -123,12 +134,16 @@ class BoundaryLaw:
         ft = self.sigma_t * area
         fs = self.tau_c * area
         d0 = ft / kn
-        df = 2.0 * self.G_c * r0 ** 2 / 4.0 / ft
+        if self.ductility is not None:
+            df = self.ductility * d0
+        else:
+            df = 2.0 * self.G_c * r0 ** 2 / 4.0 / ft
         return ft, fs, d0, df
 
     def __repr__(self):
         d = self.todict(display=True)
-        return (f"BoundaryLaw(sigma_t={d['sigma_t']:g} GPa, G_c={d['G_c']:g} J/m2, tau_c={d['tau_c']:g} GPa, "
+        soft = f"G_c={d['G_c']:g} J/m2" if self.G_c is not None else f"ductility={self.ductility:g}"
+        return (f"BoundaryLaw(sigma_t={d['sigma_t']:g} GPa, {soft}, tau_c={d['tau_c']:g} GPa, "
                 f"mu={self.mu:g}, kt_ratio={self.kt_ratio:g}, select={self.select!r})")
 
 
@@ -402,8 +417,8 @@ class BoundaryTerm:
         self.ft, self.fs, self.d0, self.df = (np.ascontiguousarray(a, float) for a in law.bond_constants(self.r0, self.kn))
         if m and np.any(self.df <= self.d0):
             k = int(np.argmin(self.df / self.d0))
-            gmin = law.G_c * self.d0[k] / self.df[k]
-            raise InputError("G_c", f"{law.G_c / J_M2:.4g} J/m2",
+            gmin = 0.5 * self.ft[k] * self.d0[k] / (self.r0[k] ** 2 / 4.0)
+            raise InputError("G_c", f"{(law.G_c or 0.0) / J_M2:.4g} J/m2",
                              f"at least {gmin / J_M2:.4g} J/m2 (the elastic energy at the tensile strength: "
                              "softening needs G_c above it)")
         self.kt = self.kn * law.kt_ratio

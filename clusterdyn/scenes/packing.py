@@ -42,7 +42,7 @@ def law_of(spec):
     except (TypeError, ValueError, KeyError) as exc:
         if isinstance(exc, InputError):
             raise
-        raise InputError("packing: law", spec["law"], f"sigma_t, G_c, tau_c, mu, kt_ratio, select ({exc})") from None
+        raise InputError("packing: law", spec["law"], f"sigma_t, G_c or ductility, tau_c, mu, kt_ratio, select ({exc})") from None
 
 
 def prepare(atoms, spec, rc, relax=None):

@@ -255,12 +255,13 @@ def calibrate_study(overrides=None, out=None, progress=True, quiet=None):
                                                                 or "none"))]
     best_packing = None
     if best is not None and spec is None and best["sigma_t"] is not None:
-        law = {"sigma_t": best["sigma_t"], "G_c": round(best["G_c"], 1), "tau_c": v["tau_c"] / units.GPa,
+        law = {"sigma_t": best["sigma_t"], "ductility": v["ductility"], "tau_c": v["tau_c"] / units.GPa,
                "mu": v["mu"], "select": best["select"]}
         best_packing = {"grain_size": v["grain_size"], "porosity": v["porosity"], "rc": v["rc"],
                         "boundaries": "law", "law": law, "material": v["material"],
-                        "description": f"calibrated (tuned) by clusterdyn study calibrate to {targets} at "
-                                       f"r0 = {v['r0'] / units.um:g} um",
+                        "description": f"calibrated (tuned) by clusterdyn study calibrate to {targets} "
+                                       f"(G_c {best['G_c']:.4g} J/m^2 at r0 = {v['r0'] / units.um:g} um; "
+                                       "ductility kept at other r0)",
                         "targets": targets, "calibrated": True,
                         "achieved": {k: best[k] for k in ("flow_stress", "spall_strength", "confined_flow",
                                                           "E_young", "M_long")}}
