@@ -52,6 +52,12 @@ change at once.  Every run is kept in
 ``OUT/runs/flow-stress-point-<hash of its parameters>/result.json`` (or
 ``error.json``); a study run again on the same folder reads them back, so
 an interrupted or extended study only runs what is missing.
+
+The point runner also takes the boundary pair law (``law_sigma_t``, ``law_G_c``, ``law_tau_c``,
+``law_mu``, ``law_select``; docs/theory.md 1.11) and the kind of test (``test``: ``confined``,
+the uniaxial strain above; ``unconfined``, uniaxial stress; ``tension``, stretched in uniaxial
+strain: the spall strength).  :mod:`clusterdyn.studies.calibrate` maps the law's strength to the
+unconfined flow stress, the spall strength, the confined flow stress and the moduli with them.
 """
 
 import math
