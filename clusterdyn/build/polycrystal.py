@@ -456,3 +456,91 @@ def polycrystal_summary(atoms):
             f"porosity {100 * r['porosity']:.2f}% (density {r['density_g_cm3']:.4g} g/cm3), "
             f"d_min {r['d_min_r0']:.3f} r0, removed {r['n_removed']} of {r['n_sites_before_removal']}, "
             f"nearest distance {r['nearest_distance_r0']:.3f} r0; built in {r['build_time_s']:.2f} s")
+
+
+# --------------------------------------------------------------------------- packings and presets
+#: Named packings of a CD polycrystal (``--set packing=NAME`` in the impact scenes and studies).
+#: ``grain_size`` in r0 (the equal-volume diameter), ``porosity`` the target of the builder,
+#: ``rc`` in r0, ``boundaries`` "bonded" (the CD paper's: boundary pairs attract like any pair),
+#: "repulsive" (set-up bonds inside grains only) or "law" (the boundary pair law of
+#: clusterdyn.md.boundary with the parameters ``law``: sigma_t and tau_c in GPa, G_c in J/m^2 or
+#: ductility = delta_f/delta_0 (the same response at every r0), mu, select).  "paper" is the default and the CD paper's packing.  Material presets are
+#: CALIBRATED: their law parameters were tuned (``clusterdyn study calibrate``) to the targets
+#: they name; ``achieved`` gives what the material-point tests measured (docs/polycrystal.md).
+PACKINGS = {
+    "paper": {"grain_size": 11.0, "porosity": 0.14, "rc": 1.15, "boundaries": "bonded",
+              "description": "the CD paper's Taylor-rod packing (14% porosity, grains of 11 r0 at r0 = 100 um)"},
+    "repulsive": {"grain_size": 5.0, "porosity": 0.20, "rc": 1.10, "boundaries": "repulsive",
+                  "description": "the flow-stress study's lowest packing: cohesionless grain boundaries"},
+    # CALIBRATED (tuned): clusterdyn study calibrate --set flow_stress=0.3GPa --set selects=all
+    # --set sigma_ts=2,4,8,16 (cube 16 r0, r0 = 100 um, seed 1; docs/polycrystal.md)
+    "6061-T6": {"grain_size": 5.0, "porosity": 0.14, "rc": 1.15, "boundaries": "law", "material": "Al-6061-T6",
+                "law": {"sigma_t": 2.928, "ductility": 8.0, "tau_c": 0.0, "mu": 0.0, "select": "all"},
+                "description": "6061-T6, calibrated (tuned) to its flow stress 0.3 GPa (unconfined); its spall "
+                               "strength is far below the metal's (no packing of the law reaches both)",
+                "targets": {"flow_stress": 0.3}, "calibrated": True,
+                "achieved": {"flow_stress": 0.271, "spall_strength": 0.175, "confined_flow": 0.446,
+                             "E_young": 10.5, "M_long": 14.4}},
+    # CALIBRATED (tuned): clusterdyn study calibrate --set spall_strength=1.3GPa --set selects=all
+    # --set sigma_ts=2,4,8,16 (same cube; docs/polycrystal.md)
+    "6061-T6-spall": {"grain_size": 5.0, "porosity": 0.14, "rc": 1.15, "boundaries": "law",
+                      "material": "Al-6061-T6",
+                      "law": {"sigma_t": 9.67, "ductility": 8.0, "tau_c": 0.0, "mu": 0.0, "select": "all"},
+                      "description": "6061-T6, calibrated (tuned) to its spall strength 1.3 GPa; its flow stress "
+                                     "is far above the metal's (no packing of the law reaches both)",
+                      "targets": {"spall_strength": 1.3}, "calibrated": True,
+                      "achieved": {"flow_stress": 1.924, "spall_strength": 1.465, "confined_flow": 2.039,
+                                   "E_young": 36.5, "M_long": 41.2}},
+}
+
+#: keys of a packing and the allowed boundary kinds
+PACKING_KEYS = ("grain_size", "porosity", "rc", "boundaries", "law", "description", "material", "targets",
+                "achieved", "calibrated")
+BOUNDARY_KINDS = ("bonded", "repulsive", "law")
+
+
+def packing_spec(packing):
+    """A packing as a dict: a name of :data:`PACKINGS`, a path to a JSON file of the same keys,
+    or a dict.  Checked (one-line InputError naming the key) before any work."""
+    import json
+    import os
+    if isinstance(packing, dict):
+        spec = dict(packing)
+        where = "packing"
+    elif isinstance(packing, str) and packing in PACKINGS:
+        spec = dict(PACKINGS[packing], name=packing)
+        where = f"packing={packing}"
+    elif isinstance(packing, (str, os.PathLike)) and os.path.isfile(packing):
+        try:
+            with open(packing) as fh:
+                spec = json.load(fh)
+        except (OSError, ValueError) as exc:
+            raise InputError("packing", str(packing), f"a JSON file of packing keys ({exc})") from None
+        if not isinstance(spec, dict):
+            raise InputError("packing", str(packing), "a JSON object of packing keys")
+        spec.setdefault("name", os.path.basename(str(packing)))
+        where = f"packing file {packing}"
+    else:
+        raise InputError("packing", packing, "one of " + ", ".join(PACKINGS) + ", or a JSON file of packing keys")
+    bad = [k for k in spec if k not in PACKING_KEYS + ("name",)]
+    if bad:
+        raise InputError(f"{where}: key", bad[0], ", ".join(PACKING_KEYS))
+    for k, lo, hi in (("grain_size", MIN_GRAIN_SIZE, math.inf), ("porosity", 0.0, 0.5), ("rc", 1.0, math.sqrt(2))):
+        if k not in spec:
+            raise InputError(f"{where}: {k}", None, "a value (every packing names grain_size, porosity, rc, "
+                             "boundaries)")
+        try:
+            x = float(spec[k])
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: {k}", spec[k], f"a number in [{lo:g}, {hi:g}]") from None
+        if not lo <= x <= hi:
+            raise InputError(f"{where}: {k}", spec[k], f"a number in [{lo:g}, {hi:g}]")
+        spec[k] = x
+    if spec.get("boundaries") not in BOUNDARY_KINDS:
+        raise InputError(f"{where}: boundaries", spec.get("boundaries"), " or ".join(BOUNDARY_KINDS))
+    if spec["boundaries"] == "law":
+        law = spec.get("law")
+        if not isinstance(law, dict) or "sigma_t" not in law or (("G_c" in law) == ("ductility" in law)):
+            raise InputError(f"{where}: law", law, "a dict with sigma_t (GPa) and G_c (J/m^2) or ductility "
+                             "(delta_f/delta_0), optionally tau_c (GPa), mu, kt_ratio, select")
+    return spec

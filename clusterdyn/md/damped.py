@@ -32,6 +32,7 @@ from ..parallel import use_threads
 from . import _integrate as I
 from .drives import Drive, _Layer
 from .ledger import EnergyLedger
+from .pieces import PIECE_KINDS
 from .region import RegionOfInterest, Removal, _compact
 from .sorting import Sorting
 from .stability import (TIMESTEP_FACTOR, StiffnessCheck, default_timestep, pair_stability_limit,  # noqa: F401
@@ -373,6 +374,9 @@ class DampedVerlet(MolecularDynamics):
         # kick) evaluates the positions of the step under way, which errors name
         at = self.nsteps if kick is None else self.nsteps + 1
         t0 = time.perf_counter()
+        for q in self.pieces:
+            if q.adds_forces:
+                q.before_forces(atoms, kick)
         if self._cd is not None:
             forces = self._engine_forces(at, kick, advanced)
         else:
@@ -713,9 +717,15 @@ class DampedVerlet(MolecularDynamics):
                                  hint="a restart keeps the run's sort interval")
         if "ledger0" in st:
             self.ledger.start_values = {k: float(x) for k, x in st["ledger0"].items()}
-        for q in self.pieces:
-            if q.name in st.get("pieces", {}):
-                q.set_state(st["pieces"][q.name])
+        have = {q.name for q in self.pieces}
+        for name, qs in st.get("pieces", {}).items():
+            if name in have:
+                next(q for q in self.pieces if q.name == name).set_state(qs)
+            elif str(qs.get("kind", "")) in PIECE_KINDS:       # a checkpoint loaded without its scene
+                self.attach_piece(PIECE_KINDS[str(qs["kind"])].from_state(qs))
+            else:
+                raise InputError("checkpoint piece", name, "a piece attached to the dynamics or one "
+                                 f"rebuilt from its state ({', '.join(sorted(PIECE_KINDS))})")
         nl = getattr(self.calc, "nl", None)
         if nl is not None and "nl_ref" in st:
             nl.build(np.asarray(st["nl_ref"]), self.atoms.cell.array, self.atoms.pbc)

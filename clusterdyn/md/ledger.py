@@ -14,7 +14,8 @@ class EnergyLedger:
     the start; ``energy_in`` = initial kinetic energy + the absolute drive work; ``residual`` =
     change of (kinetic + potential) minus (drive work + layer kinetic - damping loss - wall
     dissipated - removed kinetic - removed potential): zero for an exact integrator, velocity
-    Verlet's O(dt^2) error otherwise.
+    Verlet's O(dt^2) error otherwise.  With attached force terms that dissipate (a piece's
+    ``dissipated``, e.g. the boundary law's damage and slip), ``term_dissipated`` is booked too.
     """
 
     def __init__(self, dyn):
@@ -29,7 +30,13 @@ class EnergyLedger:
                 "work": d._drive_sum("work"), "dissipated": d._drive_sum("dissipated"),
                 "damping_loss": d.damping_loss, "removed_kinetic": r["kinetic"], "removed_potential": r["potential"],
                 "removed_px": float(r["momentum"][0]), "removed_py": float(r["momentum"][1]),
-                "removed_pz": float(r["momentum"][2])}
+                "removed_pz": float(r["momentum"][2]), **self._terms()}
+
+    def _terms(self):
+        """The attached force terms' dissipation, only where there are such terms (so a run without
+        them keeps its ledger and checkpoint as they were)."""
+        terms = [q for q in self.dyn.pieces if q.adds_forces]
+        return {"term_dissipated": float(sum(q.dissipated for q in terms))} if terms else {}
 
     def start(self):
         """Take the present state as the start."""
@@ -52,8 +59,14 @@ class EnergyLedger:
         ru = d.removed["potential"] - L0.get("removed_potential", 0.0)
         rp = d.removed["momentum"] - np.array([L0.get("removed_p" + a, 0.0) for a in "xyz"])
         change = K + U - L0["kinetic"] - L0["potential"]
-        return {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
-                "drive_work": work, "layer_kinetic": layers, "damping_loss": loss, "wall_dissipated": diss,
-                "removed_kinetic": rk, "removed_potential": ru, "removed_momentum": rp,
-                "energy_in": L0["kinetic"] + abs(work),
-                "residual": change - (work + layers - loss - diss - rk - ru)}
+        out = {"kinetic": K, "potential": U, "kinetic0": L0["kinetic"], "potential0": L0["potential"],
+               "drive_work": work, "layer_kinetic": layers, "damping_loss": loss, "wall_dissipated": diss,
+               "removed_kinetic": rk, "removed_potential": ru, "removed_momentum": rp,
+               "energy_in": L0["kinetic"] + abs(work),
+               "residual": change - (work + layers - loss - diss - rk - ru)}
+        terms = self._terms()
+        if terms:
+            td = terms["term_dissipated"] - L0.get("term_dissipated", 0.0)
+            out["term_dissipated"] = td
+            out["residual"] = change - (work + layers - loss - diss - rk - ru - td)
+        return out

@@ -5,6 +5,7 @@ A step of the dynamics is (docs/architecture.md)::
     drives.begin_step; constraints.adjust_momenta
     first half kick + drift          (the engine's fused pass, or the separate passes)
     drives.end_drift
+    piece.before_forces(...)         each piece reads the state before the pass (half-step momenta)
     forces: the pair pass (with the second half kick inside it)
             -> piece.add_forces(...)  each piece adds its forces and kicks its rows
             -> constraints.adjust_forces; drives.kick_extra
@@ -20,6 +21,10 @@ through :meth:`Piece.get_state` / :meth:`Piece.set_state` under its :attr:`Piece
 """
 
 
+#: the piece classes by name, for restoring a checkpoint's pieces that are not attached yet
+PIECE_KINDS = {}
+
+
 class Piece:
     """Base of the pieces attached to a :class:`~clusterdyn.md.DampedVerlet` (every hook a no-op).
 
@@ -30,10 +35,26 @@ class Piece:
     name = "piece"
     #: True when :meth:`add_forces` adds forces
     adds_forces = False
+    #: energy this piece has dissipated since the start (eV), booked in the energy ledger
+    dissipated = 0.0
+
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        PIECE_KINDS[cls.__name__] = cls
+
+    @classmethod
+    def from_state(cls, state):
+        """A piece made from :meth:`get_state`'s dict alone (a checkpoint loaded without its scene);
+        pieces that cannot be rebuilt so refuse."""
+        raise NotImplementedError(f"{cls.__name__} is rebuilt by its scene, not from its state")
 
     def bind(self, dyn):
         """Called by ``dyn.attach_piece``; the piece may keep ``dyn``."""
         self.dyn = dyn
+
+    def before_forces(self, atoms, kick):
+        """Before the pair pass of a force evaluation: with ``kick`` (a step's pass) the momenta
+        are still the half-step ones; ``kick`` is None for a pass outside a step."""
 
     def add_forces(self, atoms, forces, kick):
         """After the pair pass, before the constraints: add this term's forces to ``forces``
@@ -56,7 +77,8 @@ class Piece:
         """Particles were removed: ``keep`` (ascending) are the old indices kept, in order."""
 
     def get_state(self):
-        """The piece's state for a checkpoint (a dict of numbers and arrays)."""
+        """The piece's state for a checkpoint (a dict of numbers and arrays; a ``kind`` key naming
+        the class lets a checkpoint loaded alone rebuild it with :meth:`from_state`)."""
         return {}
 
     def set_state(self, state):

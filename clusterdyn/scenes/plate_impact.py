@@ -82,7 +82,7 @@ def make_plate(sample, material, r0, thickness, width, grain_size=8.0, seed=1, d
     raise InputError("sample", sample, "single or polycrystal")
 
 
-def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes=None):
+def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes=None, term=None):
     """Quench a sample (in place): damped dynamics, velocities zeroed every ``steps``.
 
     After each cycle the cell axes in ``axes`` are rescaled by
@@ -93,6 +93,9 @@ def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes
     may be rescaled.  The mean stress is the summed virials over the
     sample's volume: the cell length along periodic axes, the extent of the
     positions plus ``r0/sqrt(2)`` along free ones.
+
+    ``term``: a boundary law's term (:mod:`clusterdyn.md.boundary`), attached during the quench
+    (its bonds' virial counted in the stress).
 
     Returns
     -------
@@ -112,12 +115,14 @@ def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes
     pot = calc.potentials[0]
     K0 = pot.material.curve.K0
     dyn = DampedVerlet(atoms, J=RELAX_J)
+    if term is not None:
+        dyn.attach_piece(term)
     s = np.zeros(6)
     for _ in range(cycles):
         dyn.run(steps)
         atoms.set_momenta(np.zeros((len(atoms), 3)))
         ext = [atoms.cell[d, d] if pbc[d] else np.ptp(atoms.positions[:, d]) + pot.r0 / SQRT2 for d in range(3)]
-        s = particle_virials(atoms).sum(axis=0) / float(np.prod(ext))
+        s = (particle_virials(atoms).sum(axis=0) + (term.virial if term is not None else 0.0)) / float(np.prod(ext))
         if axes:
             f = np.ones(3)
             for a in axes:
@@ -130,7 +135,7 @@ def relax_sample(atoms, cycles=12, steps=100, lateral=True, progress=False, axes
 def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * units.um, flyer=25.0,
                  target=50.0, width=16.0, grain_size=8.0, d_min=0.85, porosity=None, seed=1,
                  noise=10 * units.m_s, J=50.0, dt_factor=TIMESTEP_FACTOR, relax_cycles=12,
-                 boundaries="bonded"):
+                 boundaries="bonded", packing=None):
     """Two plates ready to collide; returns a dict with atoms, dynamics and bookkeeping.
 
     Lengths ``flyer``, ``target``, ``width`` are in r0.  The width is rounded
@@ -138,8 +143,16 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
     ``boundaries="repulsive"`` (polycrystal): only pairs within one grain attract
     (``attraction="initial"`` with set-up bonds inside grains); pairs across a
     grain boundary only repel, so grains can slide apart and over each other.
+    ``packing`` (polycrystal; a name or file, :mod:`clusterdyn.scenes.packing`): grain size,
+    porosity and boundaries from the packing (its rc is not used: the scene's calculator keeps
+    rc = 1.15); with the boundary law the term is attached to the dynamics (``"term"``).
     """
-    if boundaries not in ("bonded", "repulsive"):
+    spec = None
+    if packing is not None and sample == "polycrystal":
+        from .packing import resolve_packing
+        spec = resolve_packing(packing)
+        grain_size, porosity, boundaries = spec["grain_size"], spec["porosity"], spec["boundaries"]
+    if boundaries not in ("bonded", "repulsive") and spec is None:
         raise InputError("boundaries", boundaries, "bonded or repulsive")
     mat = get_material(material)
     if mat.curve is None:
@@ -157,14 +170,19 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
     Lx = (flyer + target + 30) * r0
     atoms.set_cell([Lx, W, W])
     atoms.pbc = (False, True, True)
-    if sample == "polycrystal" and boundaries == "repulsive":
+    term = None
+    if spec is not None:
+        from .packing import prepare
+        calc, term, relax = prepare(atoms, spec, 1.15, (lambda a, t: relax_sample(a, cycles=relax_cycles, term=t))
+                                    if relax_cycles else None)
+    elif sample == "polycrystal" and boundaries == "repulsive":
         mark_initial_bonds(atoms, within="grain")
         calc = ClusterDynamics(attraction="initial")
     else:
         calc = ClusterDynamics()
     atoms.calc = calc
-    relax = None
-    if sample == "polycrystal" and relax_cycles:
+    relax = None if spec is None else relax
+    if sample == "polycrystal" and relax_cycles and spec is None:
         relax = relax_sample(atoms, cycles=relax_cycles)
     plate = atoms.arrays["plate"]
     fl, tg = plate == 0, plate == 1
@@ -180,6 +198,8 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
     thermal_noise(atoms, noise, seed)
     dt = dt_factor * r0 / (pot.c0 + v)
     dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    if term is not None:
+        dyn.attach_piece(term)
     x_rear = atoms.positions[tg, 0].max()
     rear = tg & (atoms.positions[:, 0] > x_rear - 1.5 * r0)
     x_impact = 0.5 * (atoms.positions[fl, 0].max() + atoms.positions[tg, 0].min())
@@ -464,6 +484,9 @@ PARAMS = [
           "while the wave crosses the target)", kind="str"),
     Param("frames", 60, "profiles recorded over the run", kind="int", low=5),
     Param("relax_cycles", 12, "polycrystal: quench cycles of 100 steps before the impact", kind="int", low=0),
+    Param("packing", None, "polycrystal: a packing preset or JSON file (clusterdyn.scenes.packing; sets grain "
+          "size, porosity and boundaries, e.g. the boundary law); none = the parameters above", kind="str",
+          optional=True),
     Param("boundaries", "bonded", "polycrystal: grain-boundary pairs attract like any pair (bonded) or only "
           "repel (repulsive: set-up bonds inside grains only)", kind="choice", choices=("bonded", "repulsive")),
 ]
@@ -530,6 +553,9 @@ class PlateImpactScene(SceneDef):
             raise InputError("grain_size", v["grain_size"], f"at most twice the thinner plate "
                              f"({min(v['flyer'], v['target']):g} r0)")
         _profile_times(v["profile_times"], {"c0": 1.0, "target": 1.0})
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            resolve_packing(v["packing"])            # checked before any work
 
     def plan(self, v):
         return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
@@ -537,7 +563,7 @@ class PlateImpactScene(SceneDef):
     def setup(self, v, stage):
         s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
                          v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
-                         boundaries=v["boundaries"])
+                         boundaries=v["boundaries"], packing=v["packing"])
         info = impact_info(s)
         info["nsteps"] = int(math.ceil(impact_duration(info, v["duration"]) / s["dt"]))
         return s["atoms"], s["dyn"], info
@@ -607,8 +633,12 @@ def _summary(r):
 # --------------------------------------------------------------------------- polycrystal shock (D-u)
 def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
                             length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
-                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12):
+                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12,
+                            packing=None):
     """Piston shock set-up at ``u`` in a relaxed polycrystal (or a [100] single crystal).
+
+    ``packing`` (polycrystal; :mod:`clusterdyn.scenes.packing`): grain size, porosity and boundaries
+    from a preset or file (the boundary law's term attached to the dynamics).
 
     The block (``length`` x ``width`` x ``width`` r0, periodic across) is
     relaxed (:func:`relax_sample`) and a 1.5 r0 layer at x-min becomes the
@@ -622,6 +652,11 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     mat = get_material(material)
     a = SQRT2 * r0
     W = max(2, int(round(width / SQRT2))) * a
+    spec = None
+    if packing is not None and sample != "single":
+        from .packing import resolve_packing
+        spec = resolve_packing(packing)
+        grain_size, porosity = spec["grain_size"], spec["porosity"]
     if sample == "single":
         atoms = fcc_packing(mat, r0, direction="100", shape=Plate(length * r0, W, axis=0),
                             pbc=(False, True, True))
@@ -631,9 +666,15 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
                             pbc=(False, True, True), d_min=d_min, target_porosity=porosity)
         report = atoms.info["polycrystal"]
     atoms.set_cell([(length + 40) * r0, W, W])
-    calc = ClusterDynamics()
-    atoms.calc = calc
-    relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
+    term = None
+    if spec is not None:
+        from .packing import prepare
+        calc, term, relax = prepare(atoms, spec, 1.15, (lambda at, t: relax_sample(at, cycles=relax_cycles, term=t))
+                                    if relax_cycles else None)
+    else:
+        calc = ClusterDynamics()
+        atoms.calc = calc
+        relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
     atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 2 * r0
     calc.setup(atoms)
     pot = calc.potentials[0]
@@ -643,6 +684,8 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     atoms.set_momenta(atoms.get_momenta())
     dt = dt_factor * r0 / (pot.c0 + u)
     dyn = DampedVerlet(atoms, timestep=dt, J=J)
+    if term is not None:
+        dyn.attach_piece(term)
     L = np.ptp(atoms.positions[:, 0])
     rho0 = atoms.get_masses().sum() / ((L + a / 2) * W * W)
     try:
@@ -665,6 +708,8 @@ SHOCK_PARAMS = [
     Param("seed", 1, "random seed", kind="int", low=0),
     Param("single", True, "also run a [100] single crystal for comparison", kind="bool"),
     Param("frames", 40, "profiles recorded over the run", kind="int", low=5),
+    Param("packing", None, "a packing preset or JSON file (clusterdyn.scenes.packing: grain size, porosity, "
+          "boundaries); none = porosity and grain_size above", kind="str", optional=True),
 ]
 
 
@@ -682,7 +727,7 @@ class PolycrystalShockScene(SceneDef):
     def setup(self, v, stage):
         s, extra = polycrystal_shock_setup(v["u"], "polycrystal" if stage == "pc" else "single", r0=v["r0"],
                                            length=v["length"], width=v["width"], grain_size=v["grain_size"],
-                                           porosity=v["porosity"], seed=v["seed"])
+                                           porosity=v["porosity"], seed=v["seed"], packing=v["packing"])
         info = shock_info(s)
         info.update(extra)
         return s.atoms, s.dyn, info

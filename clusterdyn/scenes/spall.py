@@ -75,6 +75,9 @@ PARAMS = [
     Param("level", 0.5, "release fronts tracked where the compression has fallen to this fraction of the pulse", low=0.01,
           high=0.5),
     Param("relax_cycles", 12, "polycrystal: quench cycles of 100 steps before the impact", kind="int", low=0),
+    Param("packing", None, "polycrystal: a packing preset or JSON file (clusterdyn.scenes.packing; sets grain "
+          "size, porosity and boundaries, e.g. the boundary law); none = the parameters above", kind="str",
+          optional=True),
 ]
 
 
@@ -124,13 +127,17 @@ class SpallScene(SceneDef):
             raise InputError("target", v["target"], f"thicker than the flyer ({v['flyer']:g} r0)")
         if v["sample"] != "single" and v["grain_size"] > 2 * v["flyer"]:
             raise InputError("grain_size", v["grain_size"], f"at most twice the flyer ({v['flyer']:g} r0)")
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            resolve_packing(v["packing"])            # checked before any work
 
     def plan(self, v):
         return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
 
     def setup(self, v, stage):
         s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
-                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"])
+                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
+                         packing=v["packing"])
         atoms = s["atoms"]
         info = impact_info(s)
         plate = atoms.arrays["plate"]

@@ -109,8 +109,9 @@ PARAMS = [
     Param("material", "Al-6061-T6", "material of the rod", kind="choice", choices=CD_MATERIALS),
     Param("r0", None, "cluster size (none = D0/12; the reported tables use <= D0/25)", unit="mm", low=0.0,
           low_open=True, optional=True),
-    Param("packing", "paper", "packing of the polycrystal (porosity, grain size, rc); the parameters "
-          "porosity, grain_size, rc override it", kind="choice", choices=tuple(PACKINGS)),
+    Param("packing", "paper", "packing of the polycrystal (porosity, grain size, rc, boundaries): paper, a "
+          "preset of clusterdyn.scenes.packing (e.g. 6061-T6, the boundary law) or a JSON file of its keys; the "
+          "parameters porosity, grain_size, rc override it", kind="str"),
     Param("porosity", None, "target porosity 1 - rho/rho0 (none = the packing's)", low=0.0, high=0.5,
           optional=True),
     Param("grain_size", None, "grain size, the equal-volume diameter (none = the packing's or 3.2 r0 if "
@@ -144,7 +145,13 @@ PARAMS = [
 # --------------------------------------------------------------------------- set-up
 def taylor_packing(v, r0):
     """(porosity, grain size, rc, boundaries, notes) of a parameter set at cluster size ``r0``."""
-    pk = PACKINGS[v["packing"]]
+    if v["packing"] in PACKINGS:
+        pk = PACKINGS[v["packing"]]
+    else:                       # a preset or file of clusterdyn.scenes.packing (grain size in r0)
+        from .packing import resolve_packing
+        spec = resolve_packing(v["packing"])
+        pk = {"porosity": spec["porosity"], "grain_size": spec["grain_size"] * r0, "rc": spec["rc"],
+              "boundaries": spec["boundaries"]}
     por = pk["porosity"] if v["porosity"] is None else v["porosity"]
     rc = pk["rc"] if v["rc"] is None else v["rc"]
     bnd = pk["boundaries"] if v.get("boundaries") is None else v["boundaries"]
@@ -177,13 +184,20 @@ def build_taylor(v):
     atoms = rod(mat, r0, L0, D0, axis=ax, center=center, grain_size=grain, seed=v["seed"],
                 target_porosity=por, mass=v["mass"])
     body = dict(atoms.info["bodies"][0])
-    if bnd == "repulsive":
+    term = None
+    if bnd == "law":            # the boundary law (clusterdyn.scenes.packing), quenched with its bonds held
+        from .packing import prepare, resolve_packing
+        calc, term, relax = prepare(atoms, resolve_packing(v["packing"]), rc,
+                                    (lambda a, t: relax_sample(a, cycles=v["relax_cycles"], lateral=False, term=t))
+                                    if v["relax_cycles"] else None)
+    elif bnd == "repulsive":
         mark_initial_bonds(atoms, rc=rc, within="grain")
         calc = ClusterDynamics(rc=rc, attraction="initial")
     else:
         calc = ClusterDynamics(rc=rc)
     atoms.calc = calc
-    relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
+    if term is None:
+        relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
     if relax is None:
         atoms.get_forces()            # relax_cycles=0: the calculator's set-up (its potentials) all the same
     atoms.set_momenta(np.zeros((len(atoms), 3)))
@@ -211,6 +225,8 @@ def build_taylor(v):
     atoms.set_constraint(wall)
     dt = v["dt_factor"] * r0 / (pot.c0 + V)
     dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+    if term is not None:
+        dyn.attach_piece(term)
     dyn.start_ledger()
     rho = float(atoms.get_masses().sum() / (math.pi * 0.25 * D0 ** 2 * L0))
     t_max = v["t_max"]
@@ -225,6 +241,8 @@ def build_taylor(v):
                                                            "mass_choice", "mass_factor", "density_g_cm3")},
             "relax_min_r": None if relax is None else float(relax["min_r_over_r0"]),
             "relax_steps": 0 if relax is None else int(relax["steps"])}
+    if term is not None:
+        info["boundary"] = relax["boundary"]
     return atoms, dyn, info
 
 

@@ -21,6 +21,8 @@ mca-degrading  a load / unload / reload cycle of a degrading MCA material
 flow-stress    the flow stress of a CD polycrystal (uniaxial-strain material-point
                test) against grain size, porosity, rc and boundary cohesion, and the
                packing closest to a target yield stress
+calibrate      tunes the boundary pair law (docs/theory.md 1.11) to target flow
+               stress and spall strength; writes a packing file
 dusting        numerical dusting of a smooth free surface against u, rc, damping
                and r0 (the CD paper's figs. 18-20)
 =============  =================================================================
@@ -44,6 +46,9 @@ STUDIES = {
                       "MCA material"),
     "flow-stress": ("flow_stress:flow_stress_study:PARAMS", "flow stress of a CD polycrystal (material-point "
                     "test) against grain size, porosity, rc and boundary cohesion; the packing closest to a target"),
+    "calibrate": ("calibrate:calibrate_study:PARAMS", "tune the boundary pair law to target strengths (flow "
+                  "stress, spall strength): unconfined, tension and confined material-point tests; writes a "
+                  "packing file"),
     "dusting": ("dusting:dusting_study:PARAMS", "dispersed clusters of a shocked smooth free surface against u, "
                 "rc, damping and r0 (CD paper figs. 18-20)"),
 }

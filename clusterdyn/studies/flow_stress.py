@@ -52,6 +52,12 @@ change at once.  Every run is kept in
 ``OUT/runs/flow-stress-point-<hash of its parameters>/result.json`` (or
 ``error.json``); a study run again on the same folder reads them back, so
 an interrupted or extended study only runs what is missing.
+
+The point runner also takes the boundary pair law (``law_sigma_t``, ``law_G_c``, ``law_tau_c``,
+``law_mu``, ``law_select``; docs/theory.md 1.11) and the kind of test (``test``: ``confined``,
+the uniaxial strain above; ``unconfined``, uniaxial stress; ``tension``, stretched in uniaxial
+strain: the spall strength).  :mod:`clusterdyn.studies.calibrate` maps the law's strength to the
+unconfined flow stress, the spall strength, the confined flow stress and the moduli with them.
 """
 
 import math
@@ -75,6 +81,8 @@ from .common import (ListParam, format_table, markdown_table, out_folder, parse_
                      StudyPoint, run_folder, run_scene, write_csv, write_json)
 
 BOUNDARIES = ("bonded", "repulsive")
+#: the material-point tests
+TESTS = ("confined", "unconfined", "tension")
 
 
 # --------------------------------------------------------------------------- the material-point test
@@ -94,7 +102,8 @@ def _sample(mat, r0, size, sample, grain_size, porosity, d_min, seed):
 def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrystal", grain_size=11.0,
                    porosity=0.14, d_min=0.85, rc=1.15, boundaries="bonded", strains=(0.05, 0.10, 0.15),
                    rate=1e-3, hold=30.0, average=10.0, dt=0.1, J=50.0, noise=10 * units.m_s, seed=1,
-                   relax_cycles=12, axis=0, record_every=0.5, window=0.01, progress=False):
+                   relax_cycles=12, axis=0, record_every=0.5, window=0.01, progress=False, law=None, tension=False,
+                   lateral_free=False):
     """Uniaxial-strain test of a periodic cube of clusters (the module docstring has the steps).
 
     Parameters
@@ -141,6 +150,16 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
         Compression axis (0, 1, 2).
     progress : bool
         A tqdm bar over the steps.
+    law : dict or BoundaryLaw, optional
+        The boundary pair law (:mod:`clusterdyn.md.boundary`; a dict in display units:
+        sigma_t and tau_c in GPa, G_c in J/m^2, mu, select); replaces ``boundaries``.
+    lateral_free : bool
+        Uniaxial stress instead of strain: after every reading the lateral cell axes are
+        rescaled by ``1 - sigma_lateral/(10 K0)`` toward zero lateral stress (``unconfined``
+        yield: the relaxed intensity is then the unconfined flow stress).
+    tension : bool
+        Stretch instead of compress (uniaxial strain); ``spall_strength`` is then the largest
+        tensile ``sigma_axial`` (the material point's spall strength at this rate).
 
     Returns
     -------
@@ -192,7 +211,17 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
         raise InputError("grain_size", grain_size, f"a grain no larger than the cube ({size:g} r0)")
 
     atoms, report = _sample(mat, r0, size, sample, grain_size, porosity, d_min, seed)
-    if sample == "polycrystal" and boundaries == "repulsive":
+    term = None
+    if law is not None:
+        from ..md.boundary import BoundaryLaw
+        if not isinstance(law, BoundaryLaw):
+            law = BoundaryLaw.fromdict(law, display=True)
+        # the law on the packing as built, quenched with its bonds held elastic (no damage), then
+        # released: a bond whose quenched tension exceeds its strength fails in the first steps
+        from ..md.boundary import apply_boundary_law
+        calc, term = apply_boundary_law(atoms, law, rc=rc)
+        term.hold = True
+    elif sample == "polycrystal" and boundaries == "repulsive":
         mark_initial_bonds(atoms, rc=rc, within="grain")
         calc = ClusterDynamics(rc=rc, attraction="initial")
     else:
@@ -200,15 +229,31 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     atoms.calc = calc
     calc.setup(atoms)
     pot = calc.potentials[0]
+    relaxed_bonds = None
+
     tau = pot.r0 / pot.c0
+    K0 = pot.material.curve.K0
     relax = {}
     if sample == "polycrystal" and relax_cycles:
-        rr = relax_sample(atoms, cycles=relax_cycles, axes=(0, 1, 2))
+        rr = relax_sample(atoms, cycles=relax_cycles, axes=(0, 1, 2), term=term)
         relax = {"stress": (np.asarray(rr["stress"]) / units.GPa).tolist(),
                  "min_r_over_r0": rr["min_r_over_r0"], "steps": rr["steps"]}
+    if law is not None:
+        term.hold = False
+        f = np.zeros((len(atoms), 3))
+        term.accumulate(atoms, f)            # the damage of the quenched openings (not dissipated)
+        relax["boundary"] = term.summary()
+        if sample == "polycrystal" and relax_cycles:
+            # released: quenched again with the law as it is (bonds may fail), toward zero stress
+            rr = relax_sample(atoms, cycles=max(2, relax_cycles // 3), axes=(0, 1, 2), term=term)
+            relax["stress_released"] = (np.asarray(rr["stress"]) / units.GPa).tolist()
+            relax["boundary_released"] = term.summary()
+        report = dict(report, porosity_quenched=float(1 - len(atoms) * pot.r0 ** 3 / (SQRT2 * atoms.get_volume())))
     atoms.set_momenta(np.zeros((len(atoms), 3)))
     thermal_noise(atoms, noise, seed)
     dyn = DampedVerlet(atoms, timestep=dt * tau, J=J)
+    if term is not None:
+        dyn.attach_piece(term)
     every = max(1, int(round(record_every / dt)))
     L0 = atoms.cell[axis, axis]
     eps_max = strains[-1]
@@ -220,7 +265,21 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     def record():
         t_series.append(dyn.get_time() / tau)
         e_series.append(eps_now)
-        s_series.append(cell_stress(atoms) / units.GPa)
+        W = None
+        if term is not None:
+            from ..analysis.stress import particle_virials
+            if dyn.forces is None:
+                dyn._refresh_properties()
+            W = particle_virials(atoms)
+            W[0] += term.virial            # the bonds' virial (its sum is what the cell stress needs)
+        s_series.append(cell_stress(atoms, W) / units.GPa)
+        if lateral_free:                      # toward zero lateral stress (uniaxial stress)
+            g = np.ones(3)
+            for d in range(3):
+                if d != axis:
+                    g[d] = 1.0 - s_series[-1][d] * units.GPa / (10.0 * K0)
+            atoms.set_cell(atoms.cell.array * g[:, None], scale_atoms=True)
+            dyn.forces = None
 
     bar = None
     if progress:
@@ -230,7 +289,7 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
     for i in range(1, n_ramp + 1):
         eps_now = eps_max * i / n_ramp
         f = np.ones(3)
-        f[axis] = L0 * (1.0 - eps_now) / atoms.cell[axis, axis]
+        f[axis] = L0 * (1.0 + eps_now if tension else 1.0 - eps_now) / atoms.cell[axis, axis]
         atoms.set_cell(atoms.cell.array * f[:, None], scale_atoms=True)
         dyn.forces = None                 # positions moved outside the step
         dyn.run(1)
@@ -275,7 +334,21 @@ def material_point(material="Al", r0=100 * units.um, size=24.0, sample="polycrys
             "rest_stress": S[0].tolist(),
             "series": {"t_tau": T.tolist(), "strain": E.tolist(), "stress": S.tolist()},
             "sample": report, "relax": relax, "n_clusters": len(atoms), "n_steps": int(dyn.nsteps),
-            "tau_ns": tau / units.ns, "axis": axis, "wall_time_s": time.perf_counter() - t_start}
+            "tau_ns": tau / units.ns, "axis": axis, "wall_time_s": time.perf_counter() - t_start,
+            "tension": bool(tension), "lateral_free": bool(lateral_free), "spall_strength": float(S[:, axis].max()) if tension else None,
+            "modulus_axial": _modulus(E[on_ramp], S[on_ramp][:, axis], tension),
+            "boundary": term.summary() if term is not None else None}
+
+
+def _modulus(eps, s_axial, tension, upto=0.005):
+    """Slope (GPa) of the axial stress against the strain over the first ``upto`` of the ramp
+    (compression positive for a compressive test): the longitudinal modulus in uniaxial strain,
+    Young's modulus in uniaxial stress."""
+    sel = eps <= upto + 1e-12
+    if sel.sum() < 3:
+        return None
+    y = s_axial[sel] if tension else -s_axial[sel]
+    return float(np.polyfit(eps[sel], y, 1)[0])
 
 
 # --------------------------------------------------------------------------- one run, as a cached "scene"
@@ -301,15 +374,35 @@ POINT_PARAMS = [
     Param("noise", 10.0, "random velocity after the quench", unit="m/s", low=0.0),
     Param("seed", 1, "random seed (grains, orientations, noise)", kind="int", low=0),
     Param("relax_cycles", 12, "quench cycles of 100 damped steps", kind="int", low=0),
+    Param("test", "confined", "confined (uniaxial strain), unconfined (uniaxial stress) or tension (uniaxial "
+          "strain, stretched: the spall strength)", kind="choice", choices=TESTS),
+    Param("law_sigma_t", None, "boundary law: tensile strength (none = no law)", unit="GPa", low=0.0,
+          low_open=True, optional=True),
+    Param("law_G_c", 1e5, "boundary law: fracture energy per area, J/m^2", low=0.0, low_open=True),
+    Param("law_tau_c", 0.0, "boundary law: cohesive shear strength", unit="GPa", low=0.0),
+    Param("law_mu", 0.0, "boundary law: Coulomb friction", low=0.0),
+    Param("law_select", "boundary", "boundary law on the pairs across grain boundaries or on all pairs",
+          kind="choice", choices=("boundary", "all")),
 ]
 
 #: material-point runs actually computed in this process (runs read back from a study folder are not counted)
 RUNS = [0]
 
 
+def point_law(v):
+    """The boundary law of a point's values (display units) or None."""
+    if v.get("law_sigma_t") is None:
+        return None
+    return {"sigma_t": v["law_sigma_t"] / units.GPa, "G_c": v["law_G_c"],
+            "tau_c": v["law_tau_c"] / units.GPa, "mu": v["law_mu"], "select": v["law_select"]}
+
+
 def _point_runner(v, out=None, progress=False):
     RUNS[0] += 1
-    r = material_point(material=v["material"], r0=v["r0"], size=v["size"], sample=v["sample"],
+    law = point_law(v)
+    test = v.get("test", "confined")
+    r = material_point(law=law, tension=test == "tension", lateral_free=test == "unconfined",
+                       material=v["material"], r0=v["r0"], size=v["size"], sample=v["sample"],
                        grain_size=v["grain_size"], porosity=v["porosity"], rc=v["rc"], boundaries=v["boundaries"],
                        strains=v["strains"], rate=v["rate"], hold=v["hold"], average=v["average"], dt=v["dt"],
                        J=v["J"], noise=v["noise"], seed=v["seed"], relax_cycles=v["relax_cycles"], progress=progress)
@@ -322,6 +415,8 @@ def _point_runner(v, out=None, progress=False):
          "n_clusters": Quantity(r["n_clusters"], "")}
     if r["sample"]:
         q["porosity"] = Quantity(r["sample"]["porosity"], "")
+    if r["spall_strength"] is not None:
+        q["spall_strength"] = Quantity(r["spall_strength"], "GPa", note="largest tensile sigma_axial")
     return SceneResult("flow-stress-point", q, r["wall_time_s"], extra=r)
 
 

@@ -1,0 +1,76 @@
+"""The packing of a CD polycrystal in a scene: the paper's (default), cohesionless boundaries, or the
+boundary pair law of :mod:`clusterdyn.md.boundary` with a material preset or a parameter file.
+
+``--set packing=NAME`` (a key of :data:`clusterdyn.build.polycrystal.PACKINGS`) or
+``--set packing=path/to/packing.json`` (the same keys).  Material presets are calibrated (tuned)
+to the targets they name (docs/polycrystal.md, "Calibrated packings").
+
+:func:`prepare` gives a built polycrystal its calculator (and the law's term): with the law,
+the bonds are marked on the packing as built, the packing is quenched with them held elastic
+(:attr:`~clusterdyn.md.boundary.BoundaryTerm.hold`), then released, so a bond whose quenched
+tension exceeds its strength fails at once (counted in the report), and quenched again with
+the law as it is (bonds may fail: the packing settles to rest).  The scene attaches the
+term to its dynamics: ``dyn.attach_piece(term)``.
+"""
+
+from ..build.polycrystal import PACKINGS, packing_spec
+from ..calculators import ClusterDynamics, mark_initial_bonds
+from ..errors import InputError
+from ..md.boundary import BoundaryLaw, apply_boundary_law
+from .base import Param
+
+__all__ = ["packing_param", "resolve_packing", "prepare", "PACKINGS"]
+
+
+def packing_param(default="paper", doc=None):
+    """The scenes' ``packing`` parameter: a preset name or a JSON file of packing keys."""
+    return Param("packing", default, doc or ("packing of the polycrystal: " + ", ".join(PACKINGS)
+                                             + ", or a JSON file of its keys (docs/polycrystal.md)"), kind="str")
+
+
+def resolve_packing(value):
+    """The packing dict of a ``packing`` parameter value (checked: one-line InputError)."""
+    return packing_spec(value)
+
+
+def law_of(spec):
+    """The :class:`~clusterdyn.md.boundary.BoundaryLaw` of a packing with ``boundaries="law"`` (else None)."""
+    if spec["boundaries"] != "law":
+        return None
+    try:
+        return BoundaryLaw.fromdict(spec["law"], display=True)
+    except (TypeError, ValueError, KeyError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError("packing: law", spec["law"], f"sigma_t, G_c or ductility, tau_c, mu, kt_ratio, select ({exc})") from None
+
+
+def prepare(atoms, spec, rc, relax=None):
+    """Calculator for a polycrystal ``atoms`` (``arrays['grain']``) with packing ``spec``.
+
+    ``relax(atoms, term)``: the scene's quench (returns its report), run with the calculator set
+    (and the law's bonds held elastic).  Returns ``(calc, term, report)``: ``term`` is None
+    unless the packing uses the law; ``report`` the quench's, plus ``boundary`` (the law's bonds:
+    total, failed at release, damaged).  ``atoms.calc`` is set.
+    """
+    kind = spec["boundaries"]
+    term = None
+    if kind == "law":
+        calc, term = apply_boundary_law(atoms, law_of(spec), rc=rc)
+        term.hold = True
+    elif kind == "repulsive":
+        mark_initial_bonds(atoms, rc=rc, within="grain")
+        calc = ClusterDynamics(rc=rc, attraction="initial")
+    else:
+        calc = ClusterDynamics(rc=rc)
+    atoms.calc = calc
+    report = relax(atoms, term) if relax is not None else None
+    if term is not None:
+        term.hold = False
+        import numpy as np
+        term.accumulate(atoms, np.zeros((len(atoms), 3)))     # the quenched openings' damage, stored
+        report = dict(report or {}, boundary_at_release=term.summary())
+        if relax is not None:               # released: quenched again with the law as it is
+            report["released"] = relax(atoms, term)
+        report["boundary"] = term.summary()
+    return calc, term, report
