@@ -722,6 +722,8 @@ def _display(p, value):
         return f"{value / units.NAMED[p.unit]:g}{p.unit}"
     if isinstance(value, (tuple, list)):
         return "x".join(str(x) for x in value)
+    if isinstance(value, float):
+        return f"{value:g}"
     return str(value)
 
 
