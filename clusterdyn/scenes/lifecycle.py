@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, InstabilityError, OutputError, check_interrupt
+from ..errors import DEFER_INTERRUPT, InputError, InstabilityError, OutputError, check_interrupt
 
 #: checkpoint file name in the output folder
 CHECKPOINT = "checkpoint.h5"
@@ -627,6 +627,8 @@ class SceneDef:
 
         desc = self.name if nstages == 1 else f"{self.name} ({stage.name})"
         failed = False
+        dyn.attach(check_interrupt, interval=1)      # SIGINT stops the run at its next step
+        DEFER_INTERRUPT[0] += 1
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
@@ -635,6 +637,7 @@ class SceneDef:
             failed = True
             raise
         finally:
+            DEFER_INTERRUPT[0] -= 1
             dyn.observers.clear()
             if writer is not None:
                 try:
@@ -655,7 +658,8 @@ def read_history_csv(name, path, kinds=("u",), signed=False):
     ``kinds`` are the value columns allowed: ``"u"`` (speed, u_<unit>), ``"sigma"``
     (stress, sigma_<unit>).  Refused in one line naming ``name`` and the path as written:
     a file that is not UTF-8 text, a header or rows the table reader refuses, a column of
-    another kind (a stress read as a speed), times that decrease or start after 0, and
+    another kind (a stress read as a speed), times that decrease or start after 0 (shown in
+    the file's own time unit), and
     (unless ``signed``) negative values.  Returns ``(Table, kind)``.
     """
     from ..md.drives import Table
@@ -689,6 +693,11 @@ def read_history_csv(name, path, kinds=("u",), signed=False):
         raise InputError(name, text, "a CSV of finite numbers")
     if t.size > 1 and np.any(np.diff(t) < 0):
         raise InputError(name, text, "times that never decrease")
+    if t[0] > 0:
+        tcol = next((c for c in cols if c in Table.TIME_COLUMNS), None)
+        shown = f"{t[0] / Table.TIME_COLUMNS[tcol]:g} {tcol[2:]}" if tcol else f"{t[0]:g}"
+        raise InputError(name, text, "a history that starts at time 0 (the run starts there)",
+                         hint=f"its first time is {shown}")
     if not signed and np.any(vals < 0):
         raise InputError(name, text, "values >= 0 (the drive pushes; a negative speed or stress pulls the "
                          "sample apart)")

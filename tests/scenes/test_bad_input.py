@@ -14,6 +14,7 @@ def files(tmp_path):
     (tmp_path / "sigma.csv").write_text("t_us,sigma_GPa\n0,0\n0.1,10\n1,10\n")
     (tmp_path / "neg.csv").write_text("t_ns,u_km_s\n0,-1\n20,-3\n")
     (tmp_path / "back.csv").write_text("t_ns,u_km_s\n0,1\n20,2\n10,2\n")
+    (tmp_path / "late.csv").write_text("t_ns,u_km_s\n5,1\n20,3\n")
     (tmp_path / "afile").write_text("x")
     (tmp_path / "typo.toml").write_text("frmaes = 10\n")
     (tmp_path / "extra.toml").write_text('scene = "shock"\nbogus = 1\n[params]\nframes = 10\n')
@@ -27,6 +28,7 @@ CASES = [
     ("run shock --set u_history={d}/sigma.csv", "u_history='{d}/sigma.csv'", "its columns are t_us,sigma_GPa"),
     ("run shock --set u_history={d}/neg.csv", "u_history='{d}/neg.csv'", "values >= 0"),
     ("run shock --set u_history={d}/back.csv", "u_history='{d}/back.csv'", "strictly increasing times"),
+    ("run shock --set u_history={d}/late.csv", "u_history='{d}/late.csv'", "its first time is 5 ns"),
     ("run dusting --set length=1e9mm", "parameters='length=1e9mm r0=10um'", "fits in memory"),
     ("run jets --set wavelength=1e6mm --set depth=1e6mm", "wavelength=1e6mm", "fits in memory"),
     ("run hypervelocity --set radius=1e6mm", "radius=1e6mm", "fits in memory"),
