@@ -431,13 +431,16 @@ class SceneDef:
         est = float(n) * steps / rate
         limit_h = v.get("max_wall")
         if limit_h is not None and est > limit_h * 3600.0:
-            raise InputError("max_wall", self.given("max_wall", limit_h), f"hours >= the run's estimate, {est / 3600:.3g} h",
-                             hint=f"{n} particles x {steps:.4g} steps at <= {rate:.3g} particle-steps/s; "
-                                  f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
+            raise InputError("max_wall", self.given("max_wall", limit_h),
+                             f"hours >= the run's estimate, {est / 3600:.3g} h",
+                             hint=f"{n} particles x {steps:.4g} steps at a conservative {rate:.3g} "
+                                  f"particle-steps/s; shorten the run, or allow it with --set "
+                                  f"max_wall={math.ceil(est / 3600 * 1.2):g}")
         if est > self.wall_note_s:
             upto = "up to " if stage.stop is not None else ""
             print(f"clusterdyn: note: {self.name}: this run is estimated at {upto}{_hours(est)} "
-                  f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
+                  f"({n} particles x {upto}{steps:.4g} steps at a conservative {rate:.3g} particle-steps/s)",
+                  file=sys.stderr)
 
     def _check_frames(self, v, stage):
         """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).

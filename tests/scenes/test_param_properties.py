@@ -145,7 +145,8 @@ finite_or_not = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.non
                        max_size=3))
 def test_result_json_never_holds_nan(qs, extra):
     import numpy as np
-    quantities = {k: Quantity(a if a is not None else 0.0, "km/s", reference=b, spread=c) for k, (a, b, c) in qs.items()}
+    quantities = {k: Quantity(a if a is not None else 0.0, "km/s", reference=b, spread=c)
+                  for k, (a, b, c) in qs.items()}
     extra = {k: (np.float32(x) if isinstance(x, float) and not abs(x) < math.inf or (isinstance(x, float)
                                                                                   and abs(x) < 1e38) else x)
              for k, x in extra.items()}
