@@ -617,8 +617,15 @@ class EjectaScene(ProfiledShockScene):
             prof, A = None, 0.0
         return prof, A, (lam if kind in ("sinusoid", "grooves") else None), width, r0, v["depth"]
 
+    #: most velocity snapshots a run may take (each holds every cluster's velocity)
+    MAX_SNAPSHOTS = 1000
+
     def check(self, v):
         super().check(v)
+        if v["t_end"] / v["snapshot_every"] > self.MAX_SNAPSHOTS:
+            raise InputError("snapshot_every", f"{v['snapshot_every'] / units.us:g}us", f">= t_end / "
+                             f"{self.MAX_SNAPSHOTS} = {v['t_end'] / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
+                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v['t_end'] / units.us:g} us)")
         if v["profile"] == "random":
             lam = v["wavelength"] if v["wavelength"] is not None else CASES[v["case"]][1]
             r0 = v["r0"] if v["r0"] is not None else CASES[v["case"]][3]

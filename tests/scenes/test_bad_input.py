@@ -79,6 +79,8 @@ def test_refused_in_one_line_before_any_work(cmd, named, allowed, files, capsys)
      "profile_times='1e9'", "times within the run"),
     ("run shock --set size=20x4x4 --set dt_factor=1e-9", "max_wall='24'", "hours >= the run's estimate"),
     ("run dusting --set duration=1e6us", "max_wall='24'", "hours >= the run's estimate"),
+    ("run ejecta --set t_end=1e9us", "snapshot_every='1us'", "at most 1000 velocity snapshots"),
+    ("run ejecta --set t_end=1e9us --set snapshot_every=1e7us", "max_wall='24'", "hours >= the run's estimate"),
 ])
 def test_refused_after_set_up_before_the_first_step(cmd, named, allowed, files, capsys):
     """Refusals that need the built sample (its steps, its particles): still before stepping."""
