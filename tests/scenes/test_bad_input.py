@@ -112,3 +112,12 @@ def test_fcc_packing_refuses_an_mca_material():
     from clusterdyn.errors import InputError
     with pytest.raises(InputError, match="material='alumina' is not allowed: expected a Cluster Dynamics"):
         fcc_packing("alumina", 5 * units.um)
+
+
+def test_mca_instability_names_the_command_line_setting(tmp_path, capsys):
+    """The MCA advice "reduce the time step" had no command-line setting: it now names `steps`, and the
+    time step carries its unit."""
+    assert main(["run", "mca-compression", "--quiet", "--set", "steps=100", "--set", "strain_max=200",
+                 "--set", "size=8x3x3"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--set steps= above 100" in err and " ns, default " in err, err
