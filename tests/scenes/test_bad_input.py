@@ -57,6 +57,7 @@ CASES = [
     ("study hugoniot --set u=1,1", "u='1,1'", "without repeated values"),
     ("run shock --config {d}/typo.toml", "--config='{d}/typo.toml: frmaes'", "a parameter of scene 'shock'"),
     ("run shock --config {d}/extra.toml", "--config='{d}/extra.toml: bogus'", "top-level keys scene and [params]"),
+    ("run taylor --set relax_cycles=0", "relax_cycles='0'", "an integer in [1,"),
     ("run plate-impact --set grain_size=1e11", "grain_size='1e11'", "at most twice the thinner plate"),
     ("run taylor --set grain_size=1e11", "grain_size='1e11'", "at most the rod's diameter"),
 ]
