@@ -197,16 +197,17 @@ class _WriteWatch:
 WRITE_MARGIN = 1 << 18
 
 
-def room_for(path, need, kept=None):
+def room_for(path, need, kept=None, fresh=False):
     """Raise :class:`~clusterdyn.errors.OutputError` (ENOSPC or EFBIG) unless ``need`` more bytes fit
     in ``path`` (its file system's free space for us and the process's file-size limit), checked
     *before* writing: HDF5 cannot always recover a file whose write failed half way, so a
-    run stops while its files are whole."""
+    run stops while its files are whole.  ``fresh``: the bytes go to a new file that replaces
+    ``path`` once complete (a checkpoint), so its present size does not count."""
     import errno
     import resource
     path = Path(path)
     folder = path.parent if not path.is_dir() else path
-    size = path.stat().st_size if path.is_file() else 0
+    size = path.stat().st_size if (path.is_file() and not fresh) else 0     # fresh: a new file replaces it
     try:
         st = os.statvfs(folder)
         free = st.f_bavail * st.f_frsize
@@ -613,7 +614,7 @@ class SceneDef:
 
         def save(p):
             last = Path(p).stat().st_size if Path(p).is_file() else 0
-            room_for(Path(p).parent / (Path(p).name + ".new"), max(last + last // 4, 600 * len(stage.atoms)), kept())
+            room_for(Path(p), max(last + last // 4, 600 * len(stage.atoms)), kept(), fresh=True)
             try:
                 save_run(p, dyn, extra())
                 watch.check(p, None)
