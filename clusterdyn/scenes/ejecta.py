@@ -85,7 +85,7 @@ from ..build.profiled import Grooves, RandomRoughness, Sinusoid, profiled_sample
 from ..calculators import ClusterDynamics
 from ..errors import InputError
 from ..materials import cd_material_names, get_material
-from ..md import DampedVerlet, Piston, Table, Traction
+from ..md import DampedVerlet, Piston, Traction
 from ..md.damped import TIMESTEP_FACTOR
 from ..md.pulses import flat_top, pulse_end
 from .base import Param, Quantity, register_scene
@@ -152,15 +152,6 @@ def drive_params(pressure, flat, release, t_end, J=50.0, drive="piston"):
         Param("fs_layer", FS_LAYER, "free-surface velocity: mean over the body's layer this many r0 below "
               "the valley front", low=0.0, low_open=True),
     ]
-
-
-def _csv_is_stress(path):
-    """True when a drive CSV's header names a stress column (sigma_<unit>)."""
-    with open(path) as fh:
-        for line in fh:
-            if line.strip() and not line.lstrip().startswith("#"):
-                return any(h.strip().startswith("sigma_") for h in line.split(","))
-    return False
 
 
 def _dir_key(v):
