@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import INTERRUPTED, InputError, InstabilityError, OutputError
+from .errors import DEFER_INTERRUPT, INTERRUPTED, InputError, InstabilityError, OutputError
 
 EXIT_OUTPUT = 1
 EXIT_INPUT = 2
@@ -244,10 +244,12 @@ def build_parser():
 
 
 def _on_sigint(signum, frame):
-    """SIGINT: remember it (a run checks at every frame, so an interrupt a library swallowed
-    still stops it) and raise KeyboardInterrupt as Python's own handler does."""
+    """SIGINT: remember it; a run stepping stops at its next step (errors.DEFER_INTERRUPT), anything
+    else (and a second SIGINT) raises KeyboardInterrupt at once, as Python's own handler does."""
+    again = INTERRUPTED[0]
     INTERRUPTED[0] = True
-    raise KeyboardInterrupt
+    if again or not DEFER_INTERRUPT[0]:
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -283,6 +285,10 @@ def main(argv=None):
             code = _main(argv)
         except KeyboardInterrupt:
             return _interrupted()
+        except SystemError:
+            if INTERRUPTED[0]:          # the interrupt raised inside a compiled callback (numba, h5py)
+                return _interrupted()
+            raise
         if INTERRUPTED[0]:              # an interrupt some library swallowed: still not a success
             return _interrupted()
         return code

@@ -90,9 +90,13 @@ class OutputError(OSError):
         return self.message
 
 
-#: set by the CLI's SIGINT handler; a run checks it at every analysis frame, so an interrupt
+#: set by the CLI's SIGINT handler; a run checks it at every step and frame, so an interrupt
 #: that a library swallowed ("Exception ignored in ...") still stops the run there
 INTERRUPTED = [False]
+#: > 0 while a run steps: the CLI's SIGINT handler then only sets INTERRUPTED, and the run raises
+#: KeyboardInterrupt at its next step, from Python: an exception raised inside a numba or h5py
+#: callback would come out as a SystemError (a second SIGINT raises at once)
+DEFER_INTERRUPT = [0]
 
 
 def check_interrupt():

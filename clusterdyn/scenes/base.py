@@ -152,6 +152,9 @@ class Param:
             disp = num
             ase_val = num * units.NAMED[self.unit]
         self._check_range(disp, text)
+        if not math.isfinite(ase_val) or not math.isfinite(disp) or (ase_val == 0) != (num == 0):
+            raise InputError(self.name, value, self._allowed(), hint="out of the range a float can hold in "
+                             "clusterdyn's units")
         return ase_val
 
 
@@ -242,7 +245,7 @@ class SceneResult:
             d["steady"] = bool(self.steady)
         if self.warnings:
             d["warnings"] = list(self.warnings)
-        d["wall_time_s"] = round(self.wall_time_s, 4)
+        d["wall_time_s"] = _clean(round(self.wall_time_s, 4)) if math.isfinite(self.wall_time_s) else None
         d["params"] = {k: _jsonable(v) for k, v in self.params.items()}
         d["files"] = [str(f) for f in self.files]
         if self.notes:
@@ -289,7 +292,7 @@ def _jsonable(v):
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     try:
-        return float(v)
+        return _clean(float(v))          # numpy scalars: a NaN becomes null, as for floats
     except (TypeError, ValueError):
         return str(v)
 

@@ -85,7 +85,7 @@ from ..build.profiled import Grooves, RandomRoughness, Sinusoid, profiled_sample
 from ..calculators import ClusterDynamics
 from ..errors import InputError
 from ..materials import cd_material_names, get_material
-from ..md import DampedVerlet, Piston, Table, Traction
+from ..md import DampedVerlet, Piston, Traction
 from ..md.damped import TIMESTEP_FACTOR
 from ..md.pulses import flat_top, pulse_end
 from .base import Param, Quantity, register_scene
@@ -152,15 +152,6 @@ def drive_params(pressure, flat, release, t_end, J=50.0, drive="piston"):
         Param("fs_layer", FS_LAYER, "free-surface velocity: mean over the body's layer this many r0 below "
               "the valley front", low=0.0, low_open=True),
     ]
-
-
-def _csv_is_stress(path):
-    """True when a drive CSV's header names a stress column (sigma_<unit>)."""
-    with open(path) as fh:
-        for line in fh:
-            if line.strip() and not line.lstrip().startswith("#"):
-                return any(h.strip().startswith("sigma_") for h in line.split(","))
-    return False
 
 
 def _dir_key(v):
@@ -617,8 +608,15 @@ class EjectaScene(ProfiledShockScene):
             prof, A = None, 0.0
         return prof, A, (lam if kind in ("sinusoid", "grooves") else None), width, r0, v["depth"]
 
+    #: most velocity snapshots a run may take (each holds every cluster's velocity)
+    MAX_SNAPSHOTS = 1000
+
     def check(self, v):
         super().check(v)
+        if v["t_end"] / v["snapshot_every"] > self.MAX_SNAPSHOTS:
+            raise InputError("snapshot_every", f"{v['snapshot_every'] / units.us:g}us", f">= t_end / "
+                             f"{self.MAX_SNAPSHOTS} = {v['t_end'] / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
+                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v['t_end'] / units.us:g} us)")
         if v["profile"] == "random":
             lam = v["wavelength"] if v["wavelength"] is not None else CASES[v["case"]][1]
             r0 = v["r0"] if v["r0"] is not None else CASES[v["case"]][3]

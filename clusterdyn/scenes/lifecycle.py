@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, InstabilityError, OutputError, check_interrupt
+from ..errors import DEFER_INTERRUPT, InputError, InstabilityError, OutputError, check_interrupt
 
 #: checkpoint file name in the output folder
 CHECKPOINT = "checkpoint.h5"
@@ -197,16 +197,17 @@ class _WriteWatch:
 WRITE_MARGIN = 1 << 18
 
 
-def room_for(path, need, kept=None):
+def room_for(path, need, kept=None, fresh=False):
     """Raise :class:`~clusterdyn.errors.OutputError` (ENOSPC or EFBIG) unless ``need`` more bytes fit
     in ``path`` (its file system's free space for us and the process's file-size limit), checked
     *before* writing: HDF5 cannot always recover a file whose write failed half way, so a
-    run stops while its files are whole."""
+    run stops while its files are whole.  ``fresh``: the bytes go to a new file that replaces
+    ``path`` once complete (a checkpoint), so its present size does not count."""
     import errno
     import resource
     path = Path(path)
     folder = path.parent if not path.is_dir() else path
-    size = path.stat().st_size if path.is_file() else 0
+    size = path.stat().st_size if (path.is_file() and not fresh) else 0     # fresh: a new file replaces it
     try:
         st = os.statvfs(folder)
         free = st.f_bavail * st.f_frsize
@@ -431,13 +432,16 @@ class SceneDef:
         est = float(n) * steps / rate
         limit_h = v.get("max_wall")
         if limit_h is not None and est > limit_h * 3600.0:
-            raise InputError("max_wall", self.given("max_wall", limit_h), f"hours >= the run's estimate, {est / 3600:.3g} h",
-                             hint=f"{n} particles x {steps:.4g} steps at <= {rate:.3g} particle-steps/s; "
-                                  f"shorten the run, or allow it with --set max_wall={math.ceil(est / 3600 * 1.2):g}")
+            raise InputError("max_wall", self.given("max_wall", limit_h),
+                             f"hours >= the run's estimate, {est / 3600:.3g} h",
+                             hint=f"{n} particles x {steps:.4g} steps at a conservative {rate:.3g} "
+                                  f"particle-steps/s; shorten the run, or allow it with --set "
+                                  f"max_wall={math.ceil(est / 3600 * 1.2):g}")
         if est > self.wall_note_s:
             upto = "up to " if stage.stop is not None else ""
             print(f"clusterdyn: note: {self.name}: this run is estimated at {upto}{_hours(est)} "
-                  f"({n} particles x {upto}{steps:.4g} steps at >= {rate:.3g} particle-steps/s)", file=sys.stderr)
+                  f"({n} particles x {upto}{steps:.4g} steps at a conservative {rate:.3g} particle-steps/s)",
+                  file=sys.stderr)
 
     def _check_frames(self, v, stage):
         """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).
@@ -610,7 +614,7 @@ class SceneDef:
 
         def save(p):
             last = Path(p).stat().st_size if Path(p).is_file() else 0
-            room_for(Path(p).parent / (Path(p).name + ".new"), max(last + last // 4, 600 * len(stage.atoms)), kept())
+            room_for(Path(p), max(last + last // 4, 600 * len(stage.atoms)), kept(), fresh=True)
             try:
                 save_run(p, dyn, extra())
                 watch.check(p, None)
@@ -627,6 +631,8 @@ class SceneDef:
 
         desc = self.name if nstages == 1 else f"{self.name} ({stage.name})"
         failed = False
+        dyn.attach(check_interrupt, interval=1)      # SIGINT stops the run at its next step
+        DEFER_INTERRUPT[0] += 1
         try:
             stage.t_run += run_frames(dyn, stage.nsteps, stage.frames, on_frame, progress=progress, desc=desc,
                                       checkpoint=ckpt, checkpoint_every=v.get("checkpoint_every", 0),
@@ -635,6 +641,7 @@ class SceneDef:
             failed = True
             raise
         finally:
+            DEFER_INTERRUPT[0] -= 1
             dyn.observers.clear()
             if writer is not None:
                 try:
@@ -655,7 +662,8 @@ def read_history_csv(name, path, kinds=("u",), signed=False):
     ``kinds`` are the value columns allowed: ``"u"`` (speed, u_<unit>), ``"sigma"``
     (stress, sigma_<unit>).  Refused in one line naming ``name`` and the path as written:
     a file that is not UTF-8 text, a header or rows the table reader refuses, a column of
-    another kind (a stress read as a speed), times that decrease or start after 0, and
+    another kind (a stress read as a speed), times that decrease or start after 0 (shown in
+    the file's own time unit), and
     (unless ``signed``) negative values.  Returns ``(Table, kind)``.
     """
     from ..md.drives import Table
@@ -689,6 +697,11 @@ def read_history_csv(name, path, kinds=("u",), signed=False):
         raise InputError(name, text, "a CSV of finite numbers")
     if t.size > 1 and np.any(np.diff(t) < 0):
         raise InputError(name, text, "times that never decrease")
+    if t[0] > 0:
+        tcol = next((c for c in cols if c in Table.TIME_COLUMNS), None)
+        shown = f"{t[0] / Table.TIME_COLUMNS[tcol]:g} {tcol[2:]}" if tcol else f"{t[0]:g}"
+        raise InputError(name, text, "a history that starts at time 0 (the run starts there)",
+                         hint=f"its first time is {shown}")
     if not signed and np.any(vals < 0):
         raise InputError(name, text, "values >= 0 (the drive pushes; a negative speed or stress pulls the "
                          "sample apart)")
@@ -722,6 +735,8 @@ def _display(p, value):
         return f"{value / units.NAMED[p.unit]:g}{p.unit}"
     if isinstance(value, (tuple, list)):
         return "x".join(str(x) for x in value)
+    if isinstance(value, float):
+        return f"{value:g}"
     return str(value)
 
 

@@ -129,8 +129,9 @@ PARAMS = [
           low=0.0, low_open=True, optional=True),
     Param("seed", 1, "random seed of the grains (and of the noise)", kind="int", low=0),
     Param("noise", 0.0, "initial random velocity (rms), seeded", unit="m/s", low=0.0),
-    Param("relax_cycles", 12, "quench cycles of 100 steps (J = 2, velocities zeroed) before the impact",
-          kind="int", low=0),
+    Param("relax_cycles", 12, "quench cycles of 100 steps (J = 2, velocities zeroed) before the impact (at least "
+          "1: the packing as built has pairs at 0.64 r0 across its grain boundaries, and the rod flies apart)",
+          kind="int", low=1),
     Param("t_max", None, "longest run (none = 2 rho0 V L0/(0.3 GPa) + 20 L0/c0); the run stops earlier "
           "once the rod has stopped deforming", unit="us", low=0.0, low_open=True, optional=True),
     Param("dt_factor", TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + V)", low=0.0, high=0.5,

@@ -111,6 +111,15 @@ def test_a_file_system_that_fills_stops_the_run_with_its_files_whole(tmp_path, f
     assert steps == _frames(full_run / "shock.h5md")[:len(steps)]
     assert not [f for f in os.listdir(out) if f.endswith(".tmp")]
     _restart_matches(tmp_path, out / "checkpoint.h5", full_run)
+    # a limit below one checkpoint: the first checkpoint is not begun
+    out = tmp_path / "c"
+    p = subprocess.run([sys.executable, "-c", code.replace("1500000", "400000"), "run", "shock", "--quiet",
+                        "--out", str(out), "--set", "h5md=false"] + TINY, capture_output=True, text=True,
+                       env=_env(), timeout=300)
+    assert p.returncode == 1, p.stderr
+    assert _one_line(p.stderr) == (f"clusterdyn: error: cannot write {out / 'checkpoint.h5'}: File too large; kept: "
+                                   "no checkpoint written yet; the file-size limit is 0.381 MiB")
+    assert sorted(os.listdir(out)) == [".clusterdyn.lock"]
 
 
 def test_a_write_that_fails_with_enospc_is_one_line_and_exit_1(tmp_path, full_run, capsys, monkeypatch):
