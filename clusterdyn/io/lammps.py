@@ -174,7 +174,7 @@ def lammps_table_forces(table, r, n_points=DEFAULT_TABLE_POINTS):
 
 
 def table_interpolation_error(calc, n_points=DEFAULT_TABLE_POINTS, samples=400001):
-    """Largest |f_LAMMPS - f_clusterdyn| over each table's range, relative to the largest |f|
+    """Largest ``|f_LAMMPS - f_clusterdyn|`` over each table's range, relative to the largest ``|f|``
     at r >= 0.75 r0 (the range a shock at a few km/s visits); returns a dict by entry name."""
     out = {}
     nt = len(calc.potentials)
@@ -654,7 +654,10 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     extra : dict, optional
         Stored in cd.json (e.g. the scene's parameters).
 
-    Returns the folder (a :class:`pathlib.Path`).
+    Returns
+    -------
+    pathlib.Path
+        The folder.
     """
     drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn)   # refusals before any file is written
     dt = float(dyn.dt) if dyn is not None else 0.0
