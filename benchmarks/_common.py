@@ -65,6 +65,8 @@ def shock_state(nx, fraction=0.3, chunk=100, verbose=True):
     path.parent.mkdir(parents=True, exist_ok=True)
     u = 3 * units.km_s
     s = build_shock(size=(nx, 16, 16), u=u, J=None)
+    if s.piston_mask.all():
+        raise ValueError(f"shock_state: nx = {nx} cells make a sample that is all piston; use nx >= 2")
     t0 = time.perf_counter()
     while True:
         s.dyn.run(chunk)

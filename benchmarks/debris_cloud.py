@@ -200,7 +200,7 @@ def worker_run(a):
     r0 = atoms.calc.potentials[0].r0
     nl = atoms.calc.nl
     n0 = len(atoms)
-    nx = max(1, round(n0 / 1024))
+    nx = max(2, round(n0 / 1024))           # (one cell along x would be all piston)
     slab_state = state_path(nx, a.slab_fraction)
     if not slab_state.exists():
         # the slab reference's state is made on first use in a process of its own: its build and
