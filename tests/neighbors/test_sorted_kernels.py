@@ -9,7 +9,7 @@ from clusterdyn.neighbors import NeighborList
 from clusterdyn.parallel import set_max_threads
 from clusterdyn.scenes.shock import build_shock
 
-from .test_neighbors import brute_force, full_from_half, listed
+from test_neighbors import brute_force, full_from_half, listed
 
 
 @pytest.mark.parametrize("seed", range(16))
