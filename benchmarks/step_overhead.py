@@ -137,7 +137,7 @@ def main(argv=None):
         t = np.array([r[f"{k}_us"] for r in rows])
         b, c = np.polyfit(N, t, 1) if len(rows) > 1 else (np.nan, np.nan)
         fits[k] = {"fixed_us": float(c), "ns_per_particle": float(b * 1e3)}
-    from _states import write_report
+    from _common import write_report
     cmd = (f"python benchmarks/step_overhead.py --sizes {a.sizes} --steps {a.steps} --repeat {a.repeat} "
            f"--rounds {a.rounds}" + (f" --against <a checkout of {labels['against']}>" if a.against else ""))
     lines = ["# A step's fixed cost (periodic fcc box, NVE, one thread)", "", f"    {cmd}", ""]

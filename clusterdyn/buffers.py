@@ -3,7 +3,7 @@
 A run that removes particles (``DampedVerlet(region=...)``) would otherwise
 reallocate every N-sized buffer at each removal; the old and new arrays side by
 side, and the freed blocks glibc keeps in its heap, raised the peak memory by
-100-170 bytes per particle (docs/performance.md, "Removing particles allocates
+100-170 bytes per particle (CHANGELOG.md, "Removing particles allocates
 nothing of N's size").  A buffer from :func:`grown` keeps its rows; the caller
 uses a view of the first n.  :func:`permute` reorders an array's rows in place
 (sorting the Atoms into the neighbour list's cell order, ``DampedVerlet(sort_interval=...)``)

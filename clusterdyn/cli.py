@@ -1,4 +1,4 @@
-"""The ``clusterdyn`` command.
+"""The ``clusterdyn`` command::
 
     clusterdyn run SCENE [--set key=value ...] [--config FILE.toml] [--out DIR] [--json] [--quiet]
                          [--restart CHECKPOINT]

@@ -423,8 +423,8 @@ def read_checkpoint(path):
 #: version of the run layout under /state (1: DampedVerlet.checkpoint of earlier releases)
 RUN_FORMAT = 2
 
-#: dynamics class name -> (save(dyn) -> dict of 'dynamics' and 'calculator' states,
-#: load(atoms, state, **kwargs) -> dynamics); see :func:`register_run_kind`
+#: dynamics class name -> ``(save, load)``: ``save(dyn)`` gives a dict of 'dynamics' and 'calculator'
+#: states, ``load(atoms, state, **kwargs)`` the dynamics; see :func:`register_run_kind`
 RUN_KINDS = {}
 
 

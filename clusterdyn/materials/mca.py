@@ -10,14 +10,19 @@ moduli and strengths in ASE units (eV/Angstrom^3), density in amu/Angstrom^3.
 
 MCA-specific parameters live in ``Material.extra``:
 
-``mu``            Coulomb friction coefficient of unlinked pairs (default 0.3)
-``sigma_weld``    compressive normal stress above which an unlinked pair welds
-                  (healing), eV/Angstrom^3; ``None`` = no healing
-``n_weld``        steps the pair must stay above ``sigma_weld`` (default 20)
-``sigma_d``       onset of degradation for response "degrading" (Fig. 3b)
-``D_c``           damage reached at sigma_c where the pair unlinks (default 0.8)
-``eps_d``, ``eps_f``  plastic strain at onset / end of degradation (response
-                  "plastic-degrading", Fig. 3d)
+``mu``
+    Coulomb friction coefficient of unlinked pairs (default 0.3)
+``sigma_weld``
+    compressive normal stress above which an unlinked pair welds (healing),
+    eV/Angstrom^3; ``None`` = no healing
+``n_weld``
+    steps the pair must stay above ``sigma_weld`` (default 20)
+``sigma_d``
+    onset of degradation for response "degrading" (Fig. 3b)
+``D_c``
+    damage reached at sigma_c where the pair unlinks (default 0.8)
+``eps_d``, ``eps_f``
+    plastic strain at onset / end of degradation (response "plastic-degrading", Fig. 3d)
 """
 
 from .. import units

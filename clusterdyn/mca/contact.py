@@ -370,8 +370,8 @@ def _nonneg(name, v, unit=""):
 class SegmentContact:
     """The segment contact and friction term of :class:`~clusterdyn.mca.MCADynamics` (2D).
 
-    Parameters (ASE units)
-    ----------------------
+    Parameters
+    ----------
     mu0 : float, viscous coefficient (eV/Angstrom^3 per Angstrom/ASE-time), >= 0
     mu1 : float, dry friction coefficient, >= 0
     K_av : float, mean interlocking, >= 0
@@ -379,13 +379,16 @@ class SegmentContact:
     l1, l2 : float, mean half-periods (Angstrom), > 0 when the amplitude is
     d1, d2 : float, regularity lengths (mean section lengths, Angstrom), > 0 when the amplitude is
     v_reg : float, regularising velocity (default 1 mm/s), > 0
-    tau0 : float, optional, cap of the dry part per unit segment length (eV/Angstrom^3);
-        default ``sigma0/sqrt(3)``, sigma0 the elastic limit of the softer material
-        (its yield stress, or its compressive strength if brittle)
+    tau0 : float, optional
+        Cap of the dry part per unit segment length (eV/Angstrom^3); default
+        ``sigma0/sqrt(3)``, sigma0 the elastic limit of the softer material (its yield
+        stress, or its compressive strength if brittle).
     seed : int, seed of the section draws
     friction : bool, default True; False keeps only the normal (segment) force
 
-    State (checkpointed, :meth:`get_state`): the per-(automaton, body) history
+    Notes
+    -----
+    All quantities in ASE units.  State (checkpointed, :meth:`get_state`): the per-(automaton, body) history
     ``active, x, xs, xe, amp, half, ndraw`` (state rows of the MCA state), the clip count
     and the friction work.
     """
@@ -530,7 +533,7 @@ class SegmentContact:
 
     # ---------------------------------------------------------------- records
     def summary(self):
-        """Contact state now: contacts, segments, sum F_N, sum |F_R|, mean K_mu, potential energy."""
+        """Contact state now: contacts, segments, sum F_N, sum ``|F_R|``, mean K_mu, potential energy."""
         g = self.geo
         out = {"contacts": int(g["nc"]), "segments": int(g["nseg"]), "sum_FN": float(g["fn"].sum()),
                "energy": float(g["energy"]), "clips": int(self.clips[0]), "closed": int(self.clips[1]),

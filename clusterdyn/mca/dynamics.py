@@ -98,6 +98,8 @@ class MCADynamics(MolecularDynamics):
         pair damping (half-step velocities, both half kicks around a time) and its work
         accumulates in ``contact.friction_work``; pairs across bodies leave the pair table.
 
+    Notes
+    -----
     In 2D plane strain (``dim=2``) the drives' directions must lie in the x-y
     plane; a :class:`~clusterdyn.md.Traction` without an area gets the
     periodic cell length across its normal times the unit thickness (1 Angstrom).

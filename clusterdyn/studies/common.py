@@ -310,7 +310,7 @@ def shock_row(res, err=None, wall=None):
 
 
 def pareto_front(cost, err):
-    """Indices of the runs not beaten in both cost and |err| by another run, by cost."""
+    """Indices of the runs not beaten in both cost and ``|err|`` by another run, by cost."""
     cost = np.asarray(cost, float)
     err = np.abs(np.asarray(err, float))
     ok = np.isfinite(cost) & np.isfinite(err)
