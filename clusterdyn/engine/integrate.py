@@ -46,7 +46,7 @@ def kick_drift_gather(p_nc, f_nc, x_nc, invm_n, h, dt, row_n, offs_nc, ref_nc, x
     The pass runs in the caller's order, so that the particles' arrays (momenta, forces,
     positions, masses, reference positions, offsets) stream and only the sorted rows are
     written at scattered places: about 6% off the 128k slab's step against the same pass in row
-    order (docs/performance.md, stop 25).
+    order (CHANGELOG.md, stop 25).
     """
     n = row_n.shape[0]
     nb = (n + BLOCK - 1) // BLOCK

@@ -81,7 +81,7 @@ class DampedVerlet(MolecularDynamics):
         the neighbour list's cell order (:meth:`sort_atoms`), as LAMMPS'
         ``atom_modify sort``: the per-particle passes of a step then read
         memory nearly in sequence, which keeps the speed of samples whose
-        particles mix (debris clouds: docs/performance.md, "Sorting the
+        particles mix (debris clouds: CHANGELOG.md, "Sorting the
         Atoms").  Particle indices change (every array and the constraints'
         indices follow, as for ``region``); ``atoms.arrays['id']`` names the
         particles (added, ``0..N-1``, when the Atoms have none) and the H5MD

