@@ -21,10 +21,12 @@ balance is :class:`clusterdyn.md.ledger.EnergyLedger`.
 
 import math
 import time
+import warnings
 
 import numpy as np
 from ase.md.md import MolecularDynamics
 
+from .. import units
 from ..buffers import grown, permute
 from ..calculators.cluster import ClusterDynamics
 from ..errors import InputError, InstabilityError
@@ -40,6 +42,14 @@ from .stability import (TIMESTEP_FACTOR, StiffnessCheck, default_timestep, pair_
 
 #: a particle moving more than this many r0 in one step stops the run
 MAX_STEP_DISPLACEMENT = 0.25
+
+
+#: a time step below this fraction of the stability limit is warned about
+TINY_STEP = 1e-3
+#: masses within this factor of the clusters' are accepted
+MASS_FACTOR = 10.0
+#: ASE time units per ps
+PS_ASE = 1000.0 * units.fs
 
 
 def _on_engine(calc):
@@ -153,6 +163,14 @@ class DampedVerlet(MolecularDynamics):
             raise InputError("timestep", ts, f"<= {self.stability_limit:.6g} (velocity-Verlet stability "
                              "limit 2/omega_max of the lattice at rest)",
                              hint=f"the default is {default_timestep(calc, u_max):.6g}")
+        if _on_engine(calc):
+            self._check_masses(atoms, calc)
+            if self.stability_limit is not None and ts < TINY_STEP * self.stability_limit:
+                warnings.warn(f"DampedVerlet: timestep {ts / PS_ASE:.4g} ps is {ts / self.stability_limit:.2g} of "
+                              f"the stable step {self.stability_limit / PS_ASE:.4g} ps: the run takes "
+                              f"{self.stability_limit / ts:.2g} times more steps than it needs (clusters are "
+                              "micrometres, not atoms: leave timestep=None for the default "
+                              f"{default_timestep(calc, u_max) / PS_ASE:.4g} ps)", stacklevel=2)
         super().__init__(atoms, ts, trajectory=trajectory, logfile=logfile, loginterval=loginterval,
                          **kwargs)
         self.check_interval = int(check_interval)
@@ -170,6 +188,25 @@ class DampedVerlet(MolecularDynamics):
         if sort_interval is not None:
             self.set_sort_interval(sort_interval)
         self._drives()
+
+    @staticmethod
+    def _check_masses(atoms, calc):
+        """Refuse masses far from the clusters' ``rho0 r0^3/sqrt(2)`` (Atoms built without
+        clusterdyn.build keep the atomic masses of their symbols, 1e-14 of a cluster's): a factor
+        MASS_FACTOR either way is allowed (porous samples scale their masses)."""
+        m = atoms.get_masses()
+        if not len(m):
+            return
+        want = np.array([p.mass for p in calc.potentials])[calc._check_types(atoms)]
+        ratio = m / want
+        bad = np.flatnonzero(~((ratio > 1.0 / MASS_FACTOR) & (ratio < MASS_FACTOR)))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError("atoms masses", f"{m[k]:.4g} amu (particle {k}, {bad.size} such)",
+                             f"cluster masses within a factor {MASS_FACTOR:g} of rho0 r0^3/sqrt(2) = "
+                             f"{want[k]:.4g} amu for its material",
+                             hint="Atoms not made by clusterdyn.build keep their symbols' atomic masses: "
+                                  "set them with atoms.set_masses(...) (docs/ase_users.md)")
 
     # -- pieces ----------------------------------------------------------------------
     def attach_piece(self, piece):
@@ -625,6 +662,8 @@ class DampedVerlet(MolecularDynamics):
 
     def run(self, steps=50, progress=False, desc=None):
         """Run ``steps`` steps; ``progress=True`` shows a tqdm bar with time left."""
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise InputError("steps", steps, "a whole number of steps >= 0")
         if not progress:
             return super().run(steps)
         from tqdm.auto import tqdm

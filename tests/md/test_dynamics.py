@@ -199,3 +199,30 @@ def test_a_calculator_put_on_the_atoms_later_is_used():
     a.calc = LennardJones()
     with pytest.raises(InputError, match="atoms.calc=.*ClusterDynamics"):
         d1.run(1)
+
+
+def test_ase_users_pitfalls_are_refused_or_warned():
+    """Negative step counts are refused; atomic masses on a cluster packing are refused with the fix;
+    an atom-scale time step (1 fs against a stable step of tens of ps) is warned about."""
+    import warnings
+    from ase import units as U
+    from clusterdyn.build import fcc_packing
+    from clusterdyn.calculators import ClusterDynamics
+    from clusterdyn.errors import InputError
+    from clusterdyn.md import DampedVerlet
+    a = fcc_packing("Al", r0=5e4, size=(3, 3, 3), pbc=True)
+    a.calc = ClusterDynamics()
+    dyn = DampedVerlet(a, J=None)
+    with pytest.raises(InputError, match="steps"):
+        dyn.run(-5)
+    with pytest.raises(InputError, match="steps"):
+        dyn.run(2.5)
+    b = a.copy()
+    b.calc = ClusterDynamics()
+    b.set_masses(np.full(len(b), 26.98))
+    with pytest.raises(InputError, match="set_masses"):
+        DampedVerlet(b, J=None)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        DampedVerlet(a, timestep=1 * U.fs, J=None)
+    assert any("timestep" in str(x.message) and "default" in str(x.message) for x in w)
