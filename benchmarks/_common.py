@@ -21,6 +21,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from clusterdyn.parallel import configure_openmp
+
+configure_openmp()          # the CLI's OpenMP waiting, before any kernel runs (clusterdyn.parallel)
 
 HERE = Path(__file__).resolve().parent
 #: per-run output of every script (not in git)

@@ -7,6 +7,5 @@ are ASE Atoms, dynamics are ASE MolecularDynamics subclasses, output is H5MD.
 
 __version__ = "0.1.0"
 
-from . import _openmp  # noqa: F401  (OpenMP waiting settings, before anything loads numba)
 from . import units  # noqa: F401
 from .errors import InputError, InstabilityError  # noqa: F401

@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
+from ._openmp import configure_openmp
 from .errors import DEFER_INTERRUPT, INTERRUPTED, InputError, InstabilityError, OutputError
 
 EXIT_OUTPUT = 1
@@ -280,6 +281,7 @@ _WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EAC
 
 
 def main(argv=None):
+    configure_openmp()          # before numba's OpenMP runtime starts (clusterdyn.parallel)
     with _sigint_handler():
         try:
             code = _main(argv)

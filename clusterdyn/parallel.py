@@ -15,10 +15,11 @@ spinning is no better on a quiet machine: a sleeping worker took about 70 us
 to start each parallel region here (a KVM guest), and a step has two or
 three regions, a list build two more; at 32k clusters that was a tenth of a
 two-thread step.  Unless the user set ``OMP_WAIT_POLICY`` or
-``GOMP_SPINCOUNT``, clusterdyn sets ``OMP_WAIT_POLICY=PASSIVE`` and
+``GOMP_SPINCOUNT``, the ``clusterdyn`` command sets ``OMP_WAIT_POLICY=PASSIVE`` and
 ``GOMP_SPINCOUNT`` = :data:`SPIN_COUNT` before the OpenMP runtime starts (it
-reads them once, when numba first runs a parallel kernel; ``import clusterdyn``
-makes them, :mod:`clusterdyn._openmp`): an idle worker
+reads them once, when numba first runs a parallel kernel); from Python call
+:func:`configure_openmp` first (``import clusterdyn`` changes no environment
+variable of the process): an idle worker
 spins about 50-100 us, enough to bridge the Python between a step's regions,
 then sleeps.  (Measured, 32k, two threads against one in the same process:
 79% without spinning, 88% with it; with one other busy process on the 2
@@ -29,7 +30,7 @@ Streaming passes (kicks, drift, gathers, the rebuild check) run in parallel over
 fixed blocks too (they are a tenth of a step; serial they cap two threads at 80%).
 """
 
-from ._openmp import SPIN_COUNT  # noqa: F401  (the settings are made when clusterdyn is imported)
+from ._openmp import SPIN_COUNT, configure_openmp  # noqa: F401  (the CLI calls it; Python users may)
 
 import threading  # noqa: E402
 

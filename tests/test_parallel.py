@@ -1,4 +1,5 @@
-"""clusterdyn.parallel: the OpenMP waiting settings it sets, and the user's that it keeps.
+"""clusterdyn.parallel: the OpenMP waiting settings the CLI sets (import alone sets nothing), and the
+user's that it keeps.
 
 libgomp reads them once when it loads, so each case runs in a fresh interpreter.
 """
@@ -10,20 +11,32 @@ import sys
 
 import pytest
 
-PROBE = ("import os, json, clusterdyn; "
-         "print(json.dumps({k: os.environ.get(k) for k in ('OMP_WAIT_POLICY', 'GOMP_SPINCOUNT')}))")
+PROBE = ("import os, json, clusterdyn; {call}"
+         "print(json.dumps({{k: os.environ.get(k) for k in ('OMP_WAIT_POLICY', 'GOMP_SPINCOUNT')}}))")
+CONFIGURE = "from clusterdyn.parallel import configure_openmp; configure_openmp(); "
 
 
-def _env_after_import(**set_vars):
+def _env_after_import(call=CONFIGURE, **set_vars):
     env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
     env.update(set_vars)
-    out = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-c", PROBE.format(call=call)], env=env, capture_output=True,
+                         text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def test_short_spin_then_sleep_by_default():
     from clusterdyn.parallel import SPIN_COUNT
     assert _env_after_import() == {"OMP_WAIT_POLICY": "PASSIVE", "GOMP_SPINCOUNT": str(SPIN_COUNT)}
+
+
+def test_import_alone_changes_no_environment_variable():
+    assert _env_after_import(call="") == {"OMP_WAIT_POLICY": None, "GOMP_SPINCOUNT": None}
+
+
+def test_the_command_makes_the_settings():
+    from clusterdyn.parallel import SPIN_COUNT
+    call = "import clusterdyn.cli as c; c.main(['materials']); "
+    assert _env_after_import(call=call) == {"OMP_WAIT_POLICY": "PASSIVE", "GOMP_SPINCOUNT": str(SPIN_COUNT)}
 
 
 @pytest.mark.parametrize("given, expected", [
