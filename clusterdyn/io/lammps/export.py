@@ -411,7 +411,7 @@ def check_deck(atoms, calc, dyn):
 
 
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
-                  seed=12345, skin=None, extra=None):
+                  seed=12345, skin=None, extra=None, dump_every=None, probes=()):
     """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
 
     Parameters
@@ -432,6 +432,14 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         LAMMPS neighbour skin, Angstrom (default: the calculator's skin).
     extra : dict, optional
         Stored in cd.json (e.g. the scene's parameters).
+    dump_every : int, optional
+        Steps between dumped frames (default ``nsteps // frames``); when it
+        does not divide ``nsteps`` the last step is dumped too (``write_dump``),
+        as clusterdyn's frame loop takes its last frame there.
+    probes : sequence of (name, rows, every)
+        Extra dumps ``NAME.dump`` of the rows' positions and velocities every
+        ``every`` steps (an observer of a few particles, e.g. a free-surface
+        velocity probe, without dumping the whole sample that often).
 
     Returns
     -------
@@ -456,6 +464,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     nsteps = 0 if nsteps is None else int(nsteps)
     J = getattr(dyn, "J", None)
     every = max(1, nsteps // max(1, frames)) if nsteps else 1
+    if dump_every is not None:
+        every = max(1, int(dump_every))
     pbc = atoms.pbc
     bstr = " ".join("p" if p else "s" for p in pbc)
     lines = [
@@ -491,9 +501,18 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
             "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
             "dump_modify     frames sort id format float %.17g",
         ]
+    from ...md.lammps_form import group_lines
+    for name, rows, pevery in probes:
+        lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
+        lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
+                  f"dump_modify     {name} sort id format float %.17g"]
     lines.append(f"run             {nsteps}")
+    if frames and nsteps and nsteps % every:
+        lines.append("write_dump      all custom frames.dump id type x y z vx vy vz fx fy fz c_vir[1] c_vir[2] "
+                     "c_vir[3] c_vir[4] c_vir[5] c_vir[6] modify append yes sort id format float %.17g")
     (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
     meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
+            "probes": {name: int(pevery) for name, _, pevery in probes},
             "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
             "skin_A": float(skin), "groups": groups, "attraction": calc.parameters.attraction,
             "n_bonds": None if bonds is None else int(len(bonds)),

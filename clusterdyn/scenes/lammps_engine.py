@@ -1,0 +1,330 @@
+"""A scene run by LAMMPS (``clusterdyn run SCENE --engine lammps``) and analysed by the scene itself.
+
+The scene is built exactly as on clusterdyn's own engine (its
+:meth:`~clusterdyn.scenes.lifecycle.SceneDef.setup` and
+:meth:`~clusterdyn.scenes.lifecycle.SceneDef.attach` of each stage), written
+as a LAMMPS deck (:func:`clusterdyn.io.lammps.export_lammps`) that dumps
+every step at which the scene's lifecycle would look at the run (its analysis
+frames, its observers, its H5MD frames), and run by LAMMPS as a child process
+(under the environment's ``mpirun`` with ``ranks > 1``).  The dumps are then
+*replayed* into the scene's own stage: each dumped step's positions and
+velocities are set on the stage's Atoms, the dynamics' step counter is set to
+the step, and the hooks the lifecycle calls at that step are called (the
+analysis frame, the observers, the H5MD writer).  The scene's ``finish``,
+``analyse``, ``verdict`` and ``report`` then run unchanged: the same table,
+``result.json``, PNGs, CSVs and H5MD as a clusterdyn run, with the engine,
+its ranks and LAMMPS' loop time in the notes and under ``extra.engine``.
+
+An observer that reads only a few particles (the free-surface velocity probe
+of plate-impact and spall, every 5 steps) gets its own dump of those rows
+(:data:`PROBE_ROWS`), so the full sample is dumped only at the analysis
+frames.
+
+``deck_only=True`` writes the decks and ``engine.json`` (scene, ``--set``
+values, stages) and prints the command that analyses the dumps later,
+``clusterdyn analyse SCENE DIR``: the scene is rebuilt from the same
+parameters (the builders are deterministic for a given seed; the rebuilt
+sample is checked against the dump's step 0) and the dumps are replayed.
+
+What has no faithful LAMMPS form is refused in one line before any file is
+written: the scenes outside :data:`ENGINE_SCENES` (:data:`REFUSED` gives the
+setting for each), run controls a deck cannot honour, and every drive or
+dynamics :func:`clusterdyn.io.lammps.export.check_deck` refuses.
+"""
+
+import json
+import math
+import shlex
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.lammps.export import META_FILE, check_deck, export_lammps
+from .base import get_scene
+from .export import _jsonable
+from .lifecycle import check_out
+
+#: scenes that run on the LAMMPS engine
+ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock")
+
+#: the setting of each other scene that has no faithful LAMMPS form in this engine (one line each)
+REFUSED = {
+    "spall": "the energy ledger of the report (damping and wall work) is accumulated by clusterdyn's "
+             "integrator, not by the deck",
+    "dusting": "the energy ledger of the report is accumulated by clusterdyn's integrator, not by the deck",
+    "taylor": "the run stops when the rod has come to rest (Stage.stop) and the wall's impulse record is "
+              "clusterdyn's",
+    "multilayer": "the region-of-interest removal (DampedVerlet region) has no LAMMPS form here",
+    "hypervelocity": "the region-of-interest removal (DampedVerlet region) with its booked energy and "
+                     "momentum has no LAMMPS form here",
+    "ejecta": "the pressure drive (Traction) has no LAMMPS form here",
+    "jets": "the pressure drive (Traction) has no LAMMPS form here",
+}
+
+#: MCA scenes: why none has a LAMMPS form
+MCA_WHY = ("MCA automata (pair links that break, Coulomb friction with its per-pair state) have no "
+           "LAMMPS form: run it on clusterdyn's engine (docs/lammps.md says what a distributed MCA would take)")
+
+#: observers that read a few rows only: scene -> key of the stage info holding those rows
+PROBE_ROWS = {"plate-impact": "rear", "spall": "rear"}
+
+#: run controls of clusterdyn's own run the engine cannot honour: key -> (honoured(value), why)
+ENGINE_NOT_HONOURED = {
+    "checkpoint_every": (lambda x: x == 0, "LAMMPS writes no clusterdyn checkpoints (use LAMMPS' own "
+                         "restart files)"),
+    "dt_retries": (lambda x: x == 0, "LAMMPS stops at a failing step ('Pair distance < table inner cutoff') "
+                   "instead of running again with half the time step"),
+    "profile_times": (lambda x: False, "the profiles at given times need clusterdyn's frames; the deck dumps "
+                      "'frames' frames"),
+}
+
+#: the engine's record in the output folder
+ENGINE_FILE = "engine.json"
+
+
+def check_engine(scene, overrides, v):
+    """Refuse a scene, or a given run control, that the LAMMPS engine cannot run (one line).
+
+    Returns ``{key: why}`` of the defaults it leaves aside (a note in the result)."""
+    if scene.name not in ENGINE_SCENES:
+        if scene.name.startswith("mca"):
+            raise InputError("--engine", "lammps", f"numba for scene '{scene.name}'", hint=MCA_WHY)
+        why = REFUSED.get(scene.name, "no LAMMPS form for this scene")
+        raise InputError("--engine", "lammps", f"numba for scene '{scene.name}' (lammps runs: "
+                         + ", ".join(ENGINE_SCENES) + ")", hint=why)
+    skipped = {}
+    for key, (honoured, why) in ENGINE_NOT_HONOURED.items():
+        if key not in v:
+            continue
+        if key in (overrides or {}) and not honoured(v[key]):
+            raise InputError(key, overrides[key], "a value the LAMMPS engine honours", hint=why)
+        if not honoured(v[key]):
+            skipped[key] = why
+    return skipped
+
+
+def _cadence(scene, v, stage):
+    """Steps between the lifecycle's looks at the run: analysis frames, observers, H5MD frames."""
+    every = max(1, int(round(stage.nsteps / max(1, stage.frames))))
+    h5 = max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))) if v.get("h5md", False) else None
+    probe_key = PROBE_ROWS.get(scene.name)
+    obs = [int(iv) for _, iv in stage.observers]
+    dump = every if h5 is None else math.gcd(every, h5)
+    probes = []
+    if obs:
+        g = math.gcd(*obs)
+        if probe_key is not None and probe_key in stage.info:
+            probes.append(("probe", np.asarray(stage.info[probe_key], np.int64), g))
+        else:
+            dump = math.gcd(dump, g)
+    return every, h5, dump, probes
+
+
+def _stages(scene, v):
+    """Every stage built and attached (refusals of the deck before any file)."""
+    built = []
+    for name in scene.plan(v):
+        atoms, dyn, info = scene.setup(v, name)
+        stage = scene.attach(v, name, atoms, dyn, info)
+        check_deck(stage.atoms, stage.atoms.calc, stage.dyn)
+        built.append(stage)
+    return built
+
+
+def _folders(out, stages):
+    return [out if len(stages) == 1 else out / st.name for st in stages]
+
+
+def write_decks(scene_name, overrides, out, progress=False):
+    """Build the scene and write one deck per stage into ``out`` (and ``engine.json``).
+
+    Returns ``(scene, v, stages, folders, skipped)``."""
+    scene = get_scene(scene_name)
+    if out is None:
+        raise InputError("--out", None, "a folder for the LAMMPS decks and their dumps (--engine lammps)")
+    v = scene.parse(overrides)
+    skipped = check_engine(scene, overrides, v)
+    scene.check(v)
+    out = check_out(out)
+    stages = _stages(scene, v)
+    folders = _folders(out, stages)
+    for st, folder in zip(stages, folders):
+        every, h5, dump, probes = _cadence(scene, v, st)
+        extra = {"scene": scene.name, "stage": st.name, "params": scene.display(v),
+                 "overrides": _jsonable(dict(overrides or {})), "analysis_every": every, "h5md_every": h5}
+        export_lammps(st.atoms, st.atoms.calc, st.dyn, folder, nsteps=int(st.nsteps), frames=1, dump_every=dump,
+                      probes=probes, extra=extra)
+    record = {"scene": scene.name, "overrides": _jsonable(dict(overrides or {})),
+              "stages": [st.name for st in stages], "folders": [str(f.relative_to(out)) if f != out else "."
+                                                                for f in folders]}
+    (out / ENGINE_FILE).write_text(json.dumps(record, indent=1))
+    return scene, v, stages, folders, skipped
+
+
+def analyse_command(scene_name, out):
+    """The command that analyses a deck folder's dumps once LAMMPS has run it."""
+    return f"clusterdyn analyse {scene_name} {shlex.quote(str(out))}"
+
+
+def run_command(folder, ranks):
+    """The command that runs one deck (the folder's in.cd) with ``ranks`` MPI ranks."""
+    return f"cd {shlex.quote(str(folder))} && mpirun -np {int(ranks)} lmp -in in.cd"
+
+
+def _set_frame(atoms, frame):
+    from .. import units
+    r = frame["id"] - 1
+    pos = atoms.positions
+    pos[r] = frame["positions"]
+    atoms.positions = pos
+    v = atoms.get_velocities()
+    v[r] = frame["velocities"] / units.VEL_TO_A_PER_PS
+    atoms.set_velocities(v)
+
+
+def _check_same_sample(stage, frame, folder):
+    """The rebuilt sample is the one the deck ran (step 0 of the dump, periodic axes modulo the cell)."""
+    a = stage.atoms
+    if frame["step"] != 0 or len(frame["id"]) != len(a):
+        raise InputError("DIR", str(folder), f"a deck of this scene's sample ({len(a)} particles from step 0; the "
+                         f"dump has {len(frame['id'])} at step {frame['step']})")
+    d = frame["positions"] - a.positions[frame["id"] - 1]
+    for k in range(3):
+        if a.pbc[k]:
+            L = a.cell[k, k]
+            d[:, k] -= L * np.round(d[:, k] / L)
+    tol = 1e-9 * float(np.abs(a.positions).max() + np.abs(a.cell).max() + 1.0)
+    if np.abs(d).max() > tol:
+        raise InputError("DIR", str(folder), "a deck of this scene with these parameters (the rebuilt sample "
+                         f"differs from the dump's step 0 by {np.abs(d).max():.3g} Angstrom)")
+
+
+def replay(scene, v, stage, run, folder, out, nstages, progress=False):
+    """Feed a LAMMPS run's dumps to the stage's own hooks (analysis frames, observers, H5MD)."""
+    from ..io.lammps.run import read_dump
+    meta = json.loads((Path(folder) / META_FILE).read_text())
+    every = int(meta["extra"]["analysis_every"])
+    h5 = meta["extra"].get("h5md_every")
+    frames = run.frames
+    if not frames:
+        raise InputError("DIR", str(folder), "a deck folder with its dump frames.dump")
+    _check_same_sample(stage, frames[0], folder)
+    probe = {}
+    if "probe" in meta.get("probes", {}):
+        probe = {fr["step"]: fr for fr in read_dump(Path(folder) / "probe.dump")}
+    dyn, atoms = stage.dyn, stage.atoms
+    writer, files = None, []
+    if out is not None and h5:
+        from ..io import H5MDWriter
+        path = scene._h5md_path(out, stage.name, nstages)
+        writer = H5MDWriter(str(path), atoms, dyn=dyn, parameters=scene.display(v),
+                            observables=stage.observables or {}, per_particle=stage.per_particle or {})
+        files.append(path)
+    full = {fr["step"]: fr for fr in frames}
+    steps = sorted(set(full) | set(probe))
+    try:
+        for s in steps:
+            if s in full:
+                _set_frame(atoms, full[s])
+            elif s in probe:
+                _set_frame(atoms, probe[s])
+            dyn.nsteps = s
+            for fn, iv in stage.observers:
+                if s % int(iv) == 0 and (s in probe or s in full):
+                    fn()
+            if s not in full:
+                continue
+            if writer is not None and s % int(h5) == 0:
+                writer.write()
+            if (s % every == 0 or s == stage.nsteps) and stage.on_frame is not None:
+                stage.on_frame(dyn)
+                if s > 0 and stage.stop is not None and stage.stop(dyn):
+                    break
+    finally:
+        if writer is not None:
+            writer.close()
+    stage.t_run = run.loop_time_s
+    nl = getattr(atoms.calc, "nl", None)
+    if nl is not None and run.neighbor_builds >= 0:
+        nl.nbuilds = run.neighbor_builds          # the engine's own builds, as the report names them
+    return files
+
+
+def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progress=True):
+    """``clusterdyn run SCENE --engine lammps``: returns the SceneResult, or with ``deck_only`` the
+    list of deck folders (nothing run)."""
+    from ..io.lammps.run import run_lammps
+    ranks = int(ranks)
+    if ranks < 1:
+        raise InputError("--ranks", ranks, "an integer >= 1")
+    scene, v, stages, folders, skipped = write_decks(scene_name, overrides, out)
+    if deck_only:
+        return folders
+    runs = []
+    for st, folder in zip(stages, folders):
+        if progress:
+            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder} ...", flush=True)
+        runs.append(run_lammps(folder, nprocs=ranks))
+    return _analyse(scene, v, stages, folders, runs, Path(out), skipped)
+
+
+def analyse_scene(scene_name, folder):
+    """``clusterdyn analyse SCENE DIR``: the scene's analysis and report from a LAMMPS run's dumps."""
+    from ..io.lammps.run import read_run
+    out = Path(folder)
+    rec_path = out / ENGINE_FILE
+    if not rec_path.is_file():
+        raise InputError("DIR", str(folder), f"a folder written by clusterdyn run --engine lammps ({ENGINE_FILE})")
+    rec = json.loads(rec_path.read_text())
+    if rec["scene"] != scene_name:
+        raise InputError("SCENE", scene_name, f"the scene of {folder}: {rec['scene']}")
+    scene = get_scene(scene_name)
+    overrides = rec["overrides"]
+    v = scene.parse(overrides)
+    skipped = check_engine(scene, overrides, v)
+    scene.check(v)
+    stages = []
+    for name in scene.plan(v):
+        atoms, dyn, info = scene.setup(v, name)
+        stages.append(scene.attach(v, name, atoms, dyn, info))
+    folders = _folders(out, stages)
+    runs = [read_run(f) for f in folders]
+    return _analyse(scene, v, stages, folders, runs, out, skipped)
+
+
+def _analyse(scene, v, stages, folders, runs, out, skipped):
+    import time
+
+    from .base import SceneResult
+    t0 = time.perf_counter()
+    files, summaries = [], []
+    for st, folder, run in zip(stages, folders, runs):
+        files += replay(scene, v, st, run, folder, out, len(stages))
+        summaries.append(scene.finish(v, st))
+    quantities, notes, extra = scene.analyse(v, summaries)
+    notes = list(notes)
+    for st, run in zip(stages, runs):
+        notes.append(f"engine: LAMMPS on {run.nprocs} rank(s){'' if len(stages) == 1 else f' ({st.name})'}, "
+                     f"{run.n_particles} particles, {run.nsteps} steps in {run.loop_time_s:.3g} s "
+                     f"({run.particle_steps_per_s():.3g} particle-steps/s), {run.neighbor_builds} neighbour-list "
+                     "builds")
+    for key, why in skipped.items():
+        notes.append(f"{key} not used on the LAMMPS engine: {why}")
+    extra = dict(extra) if isinstance(extra, dict) else {"scene": extra}
+    extra["engine"] = {"name": "lammps", "ranks": runs[0].nprocs if runs else 1,
+                       "stages": {st.name: {"folder": str(f), "loop_time_s": r.loop_time_s,
+                                            "wall_time_s": r.wall_time_s, "neighbor_builds": r.neighbor_builds,
+                                            "memory_mb_total": r.memory_mb_total, "timing": r.timing}
+                                  for st, f, r in zip(stages, folders, runs)}}
+    res = SceneResult(scene.name, quantities, 0.0, params=scene.display(v), notes=notes, extra=extra,
+                      files=[f for f in files if f])
+    scene.verdict(v, summaries, res)
+    res.files += [Path(f) for f in scene.report(v, summaries, res, out) or []]
+    res.wall_time_s = sum(r.wall_time_s for r in runs if r.wall_time_s == r.wall_time_s) + time.perf_counter() - t0
+    res.files.append(res.write(out))
+    return res
+
+
+__all__ = ["ENGINE_SCENES", "REFUSED", "check_engine", "write_decks", "run_scene_lammps", "analyse_scene",
+           "analyse_command", "run_command", "replay"]
