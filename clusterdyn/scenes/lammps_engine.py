@@ -75,8 +75,6 @@ ENGINE_NOT_HONOURED = {
                          "restart files)"),
     "dt_retries": (lambda x: x == 0, "LAMMPS stops at a failing step ('Pair distance < table inner cutoff') "
                    "instead of running again with half the time step"),
-    "profile_times": (lambda x: False, "the profiles at given times need clusterdyn's frames; the deck dumps "
-                      "'frames' frames"),
 }
 
 #: the engine's record in the output folder
