@@ -103,20 +103,19 @@ def check_engine(scene, overrides, v):
 
 
 def _cadence(scene, v, stage):
-    """Steps between the lifecycle's looks at the run: analysis frames, observers, H5MD frames."""
+    """Steps between the lifecycle's looks at the run: analysis frames (``frames.dump``), H5MD frames
+    (``h5md.dump`` when the cadence differs), observers (``probe.dump`` of their rows, or the whole sample)."""
     every = max(1, int(round(stage.nsteps / max(1, stage.frames))))
     h5 = max(1, stage.nsteps // max(1, int(v.get("h5md_frames", 20)))) if v.get("h5md", False) else None
-    probe_key = PROBE_ROWS.get(scene.name)
-    obs = [int(iv) for _, iv in stage.observers]
-    dump = every if h5 is None else math.gcd(every, h5)
     probes = []
+    if h5 is not None and h5 != every:
+        probes.append(("h5md", None, h5))
+    obs = [int(iv) for _, iv in stage.observers]
     if obs:
         g = math.gcd(*obs)
-        if probe_key is not None and probe_key in stage.info:
-            probes.append(("probe", np.asarray(stage.info[probe_key], np.int64), g))
-        else:
-            dump = math.gcd(dump, g)
-    return every, h5, dump, probes
+        rows = stage.info.get(PROBE_ROWS.get(scene.name, ""), None)
+        probes.append(("probe", None if rows is None else np.asarray(rows, np.int64), g))
+    return every, h5, every, probes
 
 
 def _stages(scene, v):
@@ -215,9 +214,11 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
     if not frames:
         raise InputError("DIR", str(folder), "a deck folder with its dump frames.dump")
     _check_same_sample(stage, frames[0], folder)
-    probe = {}
+    probe, h5frames = {}, {}
     if "probe" in meta.get("probes", {}):
         probe = {fr["step"]: fr for fr in read_dump(Path(folder) / "probe.dump")}
+    if "h5md" in meta.get("probes", {}):
+        h5frames = {fr["step"]: fr for fr in read_dump(Path(folder) / "h5md.dump")}
     dyn, atoms = stage.dyn, stage.atoms
     writer, files = None, []
     if out is not None and h5:
@@ -227,20 +228,19 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
                             observables=stage.observables or {}, per_particle=stage.per_particle or {})
         files.append(path)
     full = {fr["step"]: fr for fr in frames}
+    for st, fr in h5frames.items():
+        full.setdefault(st, fr)
     steps = sorted(set(full) | set(probe))
     try:
         for s in steps:
-            if s in full:
-                _set_frame(atoms, full[s])
-            elif s in probe:
-                _set_frame(atoms, probe[s])
+            _set_frame(atoms, full[s] if s in full else probe[s])
             dyn.nsteps = s
             for fn, iv in stage.observers:
-                if s % int(iv) == 0 and (s in probe or s in full):
+                if s % int(iv) == 0:
                     fn()
             if s not in full:
                 continue
-            if writer is not None and s % int(h5) == 0:
+            if writer is not None and (s % int(h5) == 0):
                 writer.write()
             if (s % every == 0 or s == stage.nsteps) and stage.on_frame is not None:
                 stage.on_frame(dyn)

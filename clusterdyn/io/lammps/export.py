@@ -439,7 +439,9 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     probes : sequence of (name, rows, every)
         Extra dumps ``NAME.dump`` of the rows' positions and velocities every
         ``every`` steps (an observer of a few particles, e.g. a free-surface
-        velocity probe, without dumping the whole sample that often).
+        velocity probe, without dumping the whole sample that often); rows
+        None: the whole sample with the columns of ``frames.dump`` (e.g. a
+        trajectory at another cadence than the analysis frames).
 
     Returns
     -------
@@ -503,6 +505,13 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         ]
     from ...md.lammps_form import group_lines
     for name, rows, pevery in probes:
+        if rows is None:                        # the whole sample, as frames.dump, at its own cadence
+            if not frames and "compute         vir all stress/atom NULL virial" not in lines:
+                lines.append("compute         vir all stress/atom NULL virial")
+            lines += [f"dump            {name} all custom {int(pevery)} {name}.dump id type x y z vx vy vz fx fy fz "
+                      "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
+                      f"dump_modify     {name} sort id format float %.17g"]
+            continue
         lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
         lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
                   f"dump_modify     {name} sort id format float %.17g"]
