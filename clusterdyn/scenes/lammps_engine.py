@@ -46,13 +46,14 @@ from .export import _jsonable
 from .lifecycle import check_out
 
 #: scenes that run on the LAMMPS engine
-ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock")
+ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock", "spall", "dusting")
+
+#: scenes whose report has the dynamics' energy ledger: on this engine it is booked from the frames
+#: (:func:`frames_ledger`)
+LEDGER_SCENES = ("spall", "dusting")
 
 #: the setting of each other scene that has no faithful LAMMPS form in this engine (one line each)
 REFUSED = {
-    "spall": "the energy ledger of the report (damping and wall work) is accumulated by clusterdyn's "
-             "integrator, not by the deck",
-    "dusting": "the energy ledger of the report is accumulated by clusterdyn's integrator, not by the deck",
     "taylor": "the run stops when the rod has come to rest (Stage.stop) and the wall's impulse record is "
               "clusterdyn's",
     "multilayer": "the region-of-interest removal (DampedVerlet region) has no LAMMPS form here",
@@ -204,6 +205,44 @@ def _check_same_sample(stage, frame, folder):
                          f"differs from the dump's step 0 by {np.abs(d).max():.3g} Angstrom)")
 
 
+def _energy(stage):
+    a = stage.atoms
+    m = a.get_masses()
+    vel = a.get_velocities()
+    K = 0.5 * float((m[:, None] * vel * vel).sum())
+    U = float(a.calc.compute(a, forces=False, virial=False)["energy"])
+    layer = np.zeros(len(a), bool)
+    for c in a.constraints:
+        if hasattr(c, "history") and hasattr(c, "index"):      # a driven layer (Piston)
+            layer[c.index] = True
+    P = (m[~layer, None] * vel[~layer]).sum(axis=0)
+    return K, U, P
+
+
+def frames_ledger(stage, start, end):
+    """The energy ledger (the keys of :meth:`clusterdyn.md.DampedVerlet.energy_ledger`, eV) of a run on
+    LAMMPS, from its first and last frames: kinetic and potential energy of both (clusterdyn's law on
+    the dumped positions); the work of constant-velocity pistons ``U . (change of the momentum of the
+    particles they drive)`` (pair damping conserves momentum, so the sample's momentum changes only by
+    the pistons' impulse); the damping loss is what the energy balance leaves, so ``residual`` (velocity
+    Verlet's error) is not measured on this engine: NaN."""
+    (K0, U0, P0), (K, U, P) = start, end
+    work = 0.0
+    for c in stage.atoms.constraints:
+        if hasattr(c, "history") and hasattr(c, "index"):
+            u = getattr(c, "_const", None)
+            if u is None or getattr(c, "free", False):
+                raise InputError("--engine", "lammps", "a scene with constant-velocity pistons for its energy "
+                                 "ledger", hint=f"{type(c).__name__} with a U(t) or a free lateral motion")
+            work += float(np.dot(np.asarray(u, float), P - P0))
+    loss = work - (K + U - K0 - U0)
+    z = np.zeros(3)
+    return {"kinetic": K, "potential": U, "kinetic0": K0, "potential0": U0, "drive_work": work,
+            "layer_kinetic": 0.0, "damping_loss": loss, "wall_dissipated": 0.0, "removed_kinetic": 0.0,
+            "removed_potential": 0.0, "removed_momentum": z, "energy_in": K0 + abs(work),
+            "residual": float("nan")}
+
+
 def replay(scene, v, stage, run, folder, out, nstages, progress=False):
     """Feed a LAMMPS run's dumps to the stage's own hooks (analysis frames, observers, H5MD)."""
     from ..io.lammps.run import read_dump
@@ -240,6 +279,8 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
                     fn()
             if s not in full:
                 continue
+            if s == 0:
+                start = _energy(stage)
             if writer is not None and (s % int(h5) == 0):
                 writer.write()
             if (s % every == 0 or s == stage.nsteps) and stage.on_frame is not None:
@@ -249,6 +290,9 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
     finally:
         if writer is not None:
             writer.close()
+    if scene.name in LEDGER_SCENES:
+        led = frames_ledger(stage, start, _energy(stage))
+        stage.dyn.energy_ledger = lambda: dict(led)     # the run's ledger, as the scene's finish asks for it
     stage.t_run = run.loop_time_s
     nl = getattr(atoms.calc, "nl", None)
     if nl is not None and run.neighbor_builds >= 0:
@@ -314,6 +358,10 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
                      f"{run.n_particles} particles, {run.nsteps} steps in {run.loop_time_s:.3g} s "
                      f"({run.particle_steps_per_s():.3g} particle-steps/s), {run.neighbor_builds} neighbour-list "
                      "builds")
+    if scene.name in LEDGER_SCENES:
+        notes.append("energy ledger on the LAMMPS engine: kinetic and potential energy from the first and last "
+                     "frames, piston work from the sample's momentum, damping loss from the balance; the "
+                     "residual (velocity Verlet's error) is not measured (NaN)")
     for key, why in skipped.items():
         notes.append(f"{key} not used on the LAMMPS engine: {why}")
     extra = dict(extra) if isinstance(extra, dict) else {"scene": extra}
