@@ -46,16 +46,14 @@ from .export import _jsonable
 from .lifecycle import check_out
 
 #: scenes that run on the LAMMPS engine
-ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock", "spall", "dusting")
+ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock", "spall", "dusting", "taylor")
 
 #: scenes whose report has the dynamics' energy ledger: on this engine it is booked from the frames
 #: (:func:`frames_ledger`)
-LEDGER_SCENES = ("spall", "dusting")
+LEDGER_SCENES = ("spall", "dusting", "taylor")
 
 #: the setting of each other scene that has no faithful LAMMPS form in this engine (one line each)
 REFUSED = {
-    "taylor": "the run stops when the rod has come to rest (Stage.stop) and the wall's impulse record is "
-              "clusterdyn's",
     "multilayer": "the region-of-interest removal (DampedVerlet region) has no LAMMPS form here",
     "hypervelocity": "the region-of-interest removal (DampedVerlet region) with its booked energy and "
                      "momentum has no LAMMPS form here",
@@ -211,6 +209,7 @@ def _energy(stage):
     vel = a.get_velocities()
     K = 0.5 * float((m[:, None] * vel * vel).sum())
     U = float(a.calc.compute(a, forces=False, virial=False)["energy"])
+    U += sum(float(c.adjust_potential_energy(a)) for c in a.constraints if hasattr(c, "adjust_potential_energy"))
     layer = np.zeros(len(a), bool)
     for c in a.constraints:
         if hasattr(c, "history") and hasattr(c, "index"):      # a driven layer (Piston)
@@ -286,6 +285,7 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
             if (s % every == 0 or s == stage.nsteps) and stage.on_frame is not None:
                 stage.on_frame(dyn)
                 if s > 0 and stage.stop is not None and stage.stop(dyn):
+                    stage.stopped_at = s
                     break
     finally:
         if writer is not None:
@@ -293,6 +293,9 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
     if scene.name in LEDGER_SCENES:
         led = frames_ledger(stage, start, _energy(stage))
         stage.dyn.energy_ledger = lambda: dict(led)     # the run's ledger, as the scene's finish asks for it
+        walls = [c for c in atoms.constraints if hasattr(c, "impulse")]
+        if len(walls) == 1:         # a frictionless wall is the only force on the sample: its impulse = -dP
+            walls[0].impulse = -(_energy(stage)[2] - start[2])
     stage.t_run = run.loop_time_s
     nl = getattr(atoms.calc, "nl", None)
     if nl is not None and run.neighbor_builds >= 0:
@@ -358,6 +361,10 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
                      f"{run.n_particles} particles, {run.nsteps} steps in {run.loop_time_s:.3g} s "
                      f"({run.particle_steps_per_s():.3g} particle-steps/s), {run.neighbor_builds} neighbour-list "
                      "builds")
+    for st, run in zip(stages, runs):
+        if getattr(st, "stopped_at", None) is not None:
+            notes.append(f"LAMMPS ran {run.nsteps} steps (the stage's longest run); the scene's stop criterion "
+                         f"ended the analysis at step {st.stopped_at}: a shorter t_max saves the rest")
     if scene.name in LEDGER_SCENES:
         notes.append("energy ledger on the LAMMPS engine: kinetic and potential energy from the first and last "
                      "frames, piston work from the sample's momentum, damping loss from the balance; the "

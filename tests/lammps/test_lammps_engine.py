@@ -80,7 +80,7 @@ def test_plate_impact_probe(tmp_path):
     assert np.abs(va - vb).max(axis=0)[1] < 1e-3 * np.abs(va[:, 1]).max()
 
 
-@pytest.mark.parametrize("scene, words", [("mca-tension", "MCA automata"), ("taylor", "Stage.stop"),
+@pytest.mark.parametrize("scene, words", [("mca-tension", "MCA automata"),
                                           ("hypervelocity", "region-of-interest removal"),
                                           ("jets", "Traction")])
 def test_refused_in_one_line(tmp_path, capsys, scene, words):
@@ -99,3 +99,28 @@ def test_engine_options_checked(tmp_path, capsys):
     assert main(["run", "shock", "--engine", "lammps", "--set", "checkpoint_every=5", "--out",
                  str(tmp_path / "c")]) == EXIT_INPUT
     assert "checkpoint_every" in capsys.readouterr().err
+
+
+def test_taylor_wall_ledger(tmp_path):
+    """Taylor on a frictionless wall (fix wall/region) for 3 us: the rod's length, its kinetic and potential
+    energy equal clusterdyn's; the wall impulse (the rod's momentum change) and the damping loss (the balance)
+    too, to the integrator's residual."""
+    s = ["--set", "r0=1.27mm", "--set", "relax_cycles=1", "--set", "t_max=3us", "--set", "h5md=false",
+         "--set", "checkpoint_every=0", "--quiet"]
+    a, b = tmp_path / "numba", tmp_path / "lammps"
+    assert main(["run", "taylor", *s, "--out", str(a)]) == 0
+    assert main(["run", "taylor", *s, "--out", str(b), "--engine", "lammps"]) == 0
+    ra, rb = result(a), result(b)
+    assert abs(ra["Lf_over_L0"]["value"] / rb["Lf_over_L0"]["value"] - 1) < 1e-6
+    for q in ("E_kinetic", "E_potential_change", "v_com_end"):
+        assert abs(ra[q]["value"] - rb[q]["value"]) < 1e-6 * abs(ra[q]["value"]), q
+    resid = abs(ra["E_residual"]["value"])
+    assert abs(ra["E_damping_loss"]["value"] - rb["E_damping_loss"]["value"]) < 2 * resid + 1e-9
+    assert rb["E_residual"]["value"] is None                  # not measured on LAMMPS (NaN)
+
+
+def test_sticking_wall_refused(tmp_path, capsys):
+    assert main(["run", "taylor", "--set", "wall=sticking", "--set", "r0=1.27mm", "--engine", "lammps",
+                 "--out", str(tmp_path / "x")]) == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "sticking" in err
