@@ -27,9 +27,10 @@ parameters (the builders are deterministic for a given seed; the rebuilt
 sample is checked against the dump's step 0) and the dumps are replayed.
 
 What has no faithful LAMMPS form is refused in one line before any file is
-written: the scenes outside :data:`ENGINE_SCENES` (:data:`REFUSED` gives the
-setting for each), run controls a deck cannot honour, and every drive or
-dynamics :func:`clusterdyn.io.lammps.export.check_deck` refuses.
+written: the scenes outside :data:`ENGINE_SCENES` (MCA), run controls a deck
+cannot honour, and every drive or dynamics
+:func:`clusterdyn.io.lammps.export.check_deck` refuses (a pressure drive, a
+region of interest, a sticking wall).
 """
 
 import json
@@ -45,21 +46,14 @@ from .base import get_scene
 from .export import _jsonable
 from .lifecycle import check_out
 
-#: scenes that run on the LAMMPS engine
-ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock", "spall", "dusting", "taylor")
+#: scenes that run on the LAMMPS engine (every CD scene; a setting without a LAMMPS form, e.g. a
+#: pressure drive, a region of interest or a sticking wall, is refused by the deck's own check)
+ENGINE_SCENES = ("shock", "plate-impact", "polycrystal-shock", "spall", "dusting", "taylor", "hypervelocity",
+                 "multilayer", "ejecta", "jets")
 
 #: scenes whose report has the dynamics' energy ledger: on this engine it is booked from the frames
 #: (:func:`frames_ledger`)
-LEDGER_SCENES = ("spall", "dusting", "taylor")
-
-#: the setting of each other scene that has no faithful LAMMPS form in this engine (one line each)
-REFUSED = {
-    "multilayer": "the region-of-interest removal (DampedVerlet region) has no LAMMPS form here",
-    "hypervelocity": "the region-of-interest removal (DampedVerlet region) with its booked energy and "
-                     "momentum has no LAMMPS form here",
-    "ejecta": "the pressure drive (Traction) has no LAMMPS form here",
-    "jets": "the pressure drive (Traction) has no LAMMPS form here",
-}
+LEDGER_SCENES = ("spall", "dusting", "taylor", "hypervelocity", "multilayer")
 
 #: MCA scenes: why none has a LAMMPS form
 MCA_WHY = ("MCA automata (pair links that break, Coulomb friction with its per-pair state) have no "
@@ -87,9 +81,8 @@ def check_engine(scene, overrides, v):
     if scene.name not in ENGINE_SCENES:
         if scene.name.startswith("mca"):
             raise InputError("--engine", "lammps", f"numba for scene '{scene.name}'", hint=MCA_WHY)
-        why = REFUSED.get(scene.name, "no LAMMPS form for this scene")
         raise InputError("--engine", "lammps", f"numba for scene '{scene.name}' (lammps runs: "
-                         + ", ".join(ENGINE_SCENES) + ")", hint=why)
+                         + ", ".join(ENGINE_SCENES) + ")")
     skipped = {}
     for key, (honoured, why) in ENGINE_NOT_HONOURED.items():
         if key not in v:
@@ -386,5 +379,5 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
     return res
 
 
-__all__ = ["ENGINE_SCENES", "REFUSED", "check_engine", "write_decks", "run_scene_lammps", "analyse_scene",
+__all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "check_engine", "write_decks", "run_scene_lammps", "analyse_scene",
            "analyse_command", "run_command", "replay"]
