@@ -82,7 +82,6 @@ def test_plate_impact_probe(tmp_path):
 
 @pytest.mark.parametrize("scene, sets, words", [
     ("mca-tension", [], "MCA automata"),
-    ("ejecta", ["--set", "drive=pressure"], "Traction"),                       # a pressure drive
     ("hypervelocity", ["--set", "keep_within=15mm", "--set", "r0=0.8mm", "--set", "radius=10mm"],
      "region of interest"),                                                      # the removal
     ("taylor", ["--set", "wall=sticking", "--set", "r0=1.27mm"], "sticking")])
