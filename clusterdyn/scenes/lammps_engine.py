@@ -116,7 +116,7 @@ def _stages(scene, v):
     for name in scene.plan(v):
         atoms, dyn, info = scene.setup(v, name)
         stage = scene.attach(v, name, atoms, dyn, info)
-        check_deck(stage.atoms, stage.atoms.calc, stage.dyn)
+        check_deck(stage.atoms, stage.atoms.calc, stage.dyn, allow_region=True)
         built.append(stage)
     return built
 
@@ -143,7 +143,7 @@ def write_decks(scene_name, overrides, out, progress=False):
         extra = {"scene": scene.name, "stage": st.name, "params": scene.display(v),
                  "overrides": _jsonable(dict(overrides or {})), "analysis_every": every, "h5md_every": h5}
         export_lammps(st.atoms, st.atoms.calc, st.dyn, folder, nsteps=int(st.nsteps), frames=1, dump_every=dump,
-                      probes=probes, extra=extra)
+                      probes=probes, extra=extra, region_removal=True)
     record = {"scene": scene.name, "overrides": _jsonable(dict(overrides or {})),
               "stages": [st.name for st in stages], "folders": [str(f.relative_to(out)) if f != out else "."
                                                                 for f in folders]}
@@ -168,14 +168,19 @@ def run_command(folder, ranks):
             "-screen none")
 
 
-def _set_frame(atoms, frame):
+def _set_frame(atoms, frame, row_ids):
+    """Set a dumped frame's positions and velocities on the rows of its ids (``row_ids``: the LAMMPS id
+    of each row, increasing; ids no longer among the rows, removed by the region, are skipped)."""
     from .. import units
-    r = frame["id"] - 1
+    ids = frame["id"]
+    r = np.searchsorted(row_ids, ids)
+    ok = (r < len(row_ids)) & (row_ids[np.minimum(r, len(row_ids) - 1)] == ids)
+    r = r[ok]
     pos = atoms.positions
-    pos[r] = frame["positions"]
+    pos[r] = frame["positions"][ok]
     atoms.positions = pos
     v = atoms.get_velocities()
-    v[r] = frame["velocities"] / units.VEL_TO_A_PER_PS
+    v[r] = frame["velocities"][ok] / units.VEL_TO_A_PER_PS
     atoms.set_velocities(v)
 
 
@@ -219,6 +224,8 @@ def frames_ledger(stage, start, end):
     the pistons' impulse); the damping loss is what the energy balance leaves, so ``residual`` (velocity
     Verlet's error) is not measured on this engine: NaN."""
     (K0, U0, P0), (K, U, P) = start, end
+    rem = getattr(stage.dyn, "removed", None) or {"kinetic": 0.0, "potential": 0.0, "momentum": np.zeros(3)}
+    rk, ru, rp = float(rem["kinetic"]), float(rem["potential"]), np.asarray(rem["momentum"], float)
     work = 0.0
     for c in stage.atoms.constraints:
         if hasattr(c, "history") and hasattr(c, "index"):
@@ -226,12 +233,12 @@ def frames_ledger(stage, start, end):
             if u is None or getattr(c, "free", False):
                 raise InputError("--engine", "lammps", "a scene with constant-velocity pistons for its energy "
                                  "ledger", hint=f"{type(c).__name__} with a U(t) or a free lateral motion")
-            work += float(np.dot(np.asarray(u, float), P - P0))
-    loss = work - (K + U - K0 - U0)
-    z = np.zeros(3)
+            work += float(np.dot(np.asarray(u, float), P + rp - P0))
+    loss = work - (K + U - K0 - U0) - rk - ru
+    z = rp
     return {"kinetic": K, "potential": U, "kinetic0": K0, "potential0": U0, "drive_work": work,
-            "layer_kinetic": 0.0, "damping_loss": loss, "wall_dissipated": 0.0, "removed_kinetic": 0.0,
-            "removed_potential": 0.0, "removed_momentum": z, "energy_in": K0 + abs(work),
+            "layer_kinetic": 0.0, "damping_loss": loss, "wall_dissipated": 0.0, "removed_kinetic": rk,
+            "removed_potential": ru, "removed_momentum": z, "energy_in": K0 + abs(work),
             "residual": float("nan")}
 
 
@@ -258,19 +265,38 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
         writer = H5MDWriter(str(path), atoms, dyn=dyn, parameters=scene.display(v),
                             observables=stage.observables or {}, per_particle=stage.per_particle or {})
         files.append(path)
+    removal = {}
+    region = getattr(dyn, "region", None)
+    if region is not None:
+        for fr in read_dump(Path(folder) / "removal.dump"):
+            removal.setdefault(fr["step"], fr)          # the state before the deletion (a run's setup may dump again)
+    interval = int(getattr(dyn, "remove_interval", 0) or 0)
+    row_ids = np.arange(1, len(atoms) + 1, dtype=np.int64)
     full = {fr["step"]: fr for fr in frames}
     for st, fr in h5frames.items():
         full.setdefault(st, fr)
-    steps = sorted(set(full) | set(probe))
+    steps = sorted(set(full) | set(probe) | set(removal))
     try:
         for s in steps:
-            _set_frame(atoms, full[s] if s in full else probe[s])
+            if s > 0 and region is not None and s % interval == 0 and s in removal:
+                _set_frame(atoms, removal[s], row_ids)      # clusterdyn removes inside the step, before its hooks
+                dyn.nsteps = s - 1
+                atoms.arrays["cd_lammps_id"] = row_ids.copy()
+                dyn.forces = None
+                dyn.remove_outside()                        # books the removed energy and momentum, drops the rows
+                row_ids = np.asarray(atoms.arrays.pop("cd_lammps_id"), np.int64)
+            src = full.get(s, probe.get(s, removal.get(s)))
+            _set_frame(atoms, src, row_ids)
             dyn.nsteps = s
             for fn, iv in stage.observers:
                 if s % int(iv) == 0:
                     fn()
             if s not in full:
                 continue
+            if s == stage.nsteps or s == steps[-1]:
+                if len(full[s]["id"]) != len(row_ids) or np.any(np.sort(full[s]["id"]) != row_ids):
+                    raise InputError("DIR", str(folder), f"a run whose particles match the replayed removal (step "
+                                     f"{s}: LAMMPS has {len(full[s]['id'])}, the replay {len(row_ids)})")
             if s == 0:
                 start = _energy(stage)
             if writer is not None and (s % int(h5) == 0):

@@ -212,6 +212,7 @@ def read_run(folder, wall=float("nan")):
         raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
                          "'Loop time'; run the deck first)")
     lt, npr, nst, nat = loop[-1]
+    lt, nst = sum(float(x[0]) for x in loop), sum(int(x[2]) for x in loop)   # a deck of several runs: all
     frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
     mem = re.findall(r"Per MPI rank memory allocation \(min/avg/max\) = ([0-9.eE+-]+) \| ([0-9.eE+-]+) \| ([0-9.eE+-]+) Mbytes", log)
     out = LammpsRun(folder, int(npr), float(lt), int(nst), int(nat), frames, thermo, log, wall, builds)
