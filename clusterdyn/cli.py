@@ -1,7 +1,8 @@
 """The ``clusterdyn`` command::
 
     clusterdyn run SCENE [--set key=value ...] [--config FILE.toml] [--out DIR] [--json] [--quiet]
-                         [--restart CHECKPOINT]
+                         [--restart CHECKPOINT] [--engine numba|lammps [--ranks N] [--deck-only]]
+    clusterdyn analyse SCENE DIR      (a --engine lammps folder whose decks have run)
     clusterdyn study STUDY [--set key=value ...] [--out DIR] [--json]
     clusterdyn list
     clusterdyn materials
@@ -120,7 +121,40 @@ def cmd_run(args):
         if not Path(args.restart).is_file():
             raise InputError("--restart", args.restart, "an existing checkpoint file")
     out = Path(args.out) if args.out else None
+    if args.engine == "lammps":
+        return _run_lammps(args, overrides, out)
+    if args.ranks is not None or args.deck_only:
+        raise InputError("--ranks/--deck-only", args.ranks if args.ranks is not None else "--deck-only",
+                         "only with --engine lammps")
     res = scene.run(overrides, out=out, progress=not (args.quiet or args.json), **kw)
+    _print_result(res, args)
+    return 0
+
+
+def _run_lammps(args, overrides, out):
+    from .scenes.lammps_engine import analyse_command, run_command, run_scene_lammps
+    if args.restart:
+        raise InputError("--restart", args.restart, "no --restart with --engine lammps (LAMMPS writes no "
+                         "clusterdyn checkpoints)")
+    ranks = 1 if args.ranks is None else args.ranks
+    got = run_scene_lammps(args.scene, overrides, out, ranks=ranks, deck_only=args.deck_only,
+                           progress=not (args.quiet or args.json))
+    if args.deck_only:
+        if args.json:
+            print(json.dumps({"decks": [str(f) for f in got], "run": [run_command(f, ranks) for f in got],
+                              "analyse": analyse_command(args.scene, out)}))
+        elif not args.quiet:
+            for f in got:
+                print(f"wrote LAMMPS deck to {f}; run it with: {run_command(f, ranks)}")
+            print(f"then analyse its dumps with: {analyse_command(args.scene, out)}")
+        return 0
+    _print_result(got, args)
+    return 0
+
+
+def cmd_analyse(args):
+    from .scenes.lammps_engine import analyse_scene
+    res = analyse_scene(args.scene, args.dir)
     _print_result(res, args)
     return 0
 
@@ -219,7 +253,20 @@ def build_parser():
     r.add_argument("--restart", metavar="CHECKPOINT")
     r.add_argument("--threads", type=int, metavar="N", help="threads of the kernels (default: all; "
                    "one is faster on a machine busy with other jobs)")
+    r.add_argument("--engine", choices=("numba", "lammps"), default="numba",
+                   help="numba: clusterdyn's own kernels (default); lammps: the scene's deck run by LAMMPS "
+                   "(docs/lammps.md), its dumps analysed by the scene")
+    r.add_argument("--ranks", type=int, metavar="N", help="MPI ranks of the LAMMPS run (--engine lammps; "
+                   "default 1)")
+    r.add_argument("--deck-only", action="store_true", help="--engine lammps: write the decks and the command "
+                   "that analyses their dumps later (clusterdyn analyse SCENE DIR), run nothing")
     r.set_defaults(func=cmd_run)
+    an = sub.add_parser("analyse", help="a scene's analysis and report from the dumps of its LAMMPS decks")
+    an.add_argument("scene")
+    an.add_argument("dir")
+    an.add_argument("--json", action="store_true")
+    an.add_argument("--quiet", action="store_true")
+    an.set_defaults(func=cmd_analyse)
     s = sub.add_parser("study", help="run a study (clusterdyn list names them)", add_help=False)
     s.add_argument("study")
     s.add_argument("--help", "-h", action="store_true", help="the study's parameters")

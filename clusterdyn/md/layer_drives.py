@@ -439,9 +439,55 @@ class Traction(_Layer):
                 "work_J": float(self.work / units.J)}
 
     def lammps_form(self, atoms, dt, k):
-        """Refused: a layer free along its normal under a stress history has no faithful LAMMPS form here."""
-        raise InputError("atoms.constraints", repr(self), "Piston or Wall drives (a traction has no faithful "
-                         "LAMMPS form in this export)")
+        """The rigid layer free along its normal (group ``traction<k>``, integrated by ``fix nve``):
+        ``fix aveforce`` gives every particle of the layer the layer's mean force plus
+        ``-stress(t) area / n`` along the normal (an equal-style variable of clusterdyn's time for a
+        :class:`~clusterdyn.md.histories.Table` stress, exact for the piecewise-linear law; evaluated at
+        the force pass, as :meth:`adjust_forces` does), ``fix setforce`` zeroes the tangential
+        components (the tangential velocity stays zero).  With equal masses in the layer this is the
+        rigid body's velocity Verlet of :meth:`adjust_forces`.  Refused in one line: a normal not along
+        an axis, a tangential velocity, a stress law other than a constant or a Table, masses that
+        differ within the layer, a layer already moving across its normal."""
+        ax = int(np.argmax(np.abs(self.normal)))
+        if abs(abs(self.normal[ax]) - 1.0) > 1e-12:
+            raise InputError("atoms.constraints", repr(self), "a traction whose normal is along x, y or z "
+                             "(fix aveforce/setforce act on components)")
+        if self.history.max_abs() != 0.0:
+            raise InputError("atoms.constraints", repr(self), "a traction without tangential velocity (a "
+                             "prescribed tangential U(t) has no form with fix aveforce here)")
+        m = _masses(atoms)[self.index]
+        if m.size == 0 or np.ptp(m) > 1e-12 * m.max():
+            raise InputError("atoms.constraints", repr(self), "a traction layer of equal masses (fix aveforce "
+                             "gives every particle the same force)")
+        self._resolve(atoms)
+        name = f"traction{k}"
+        ids = np.asarray(self.index) + 1
+        n = int(ids.size)
+        form = LammpsForm(groups=group_lines(name, ids))
+        sign = -float(self.normal[ax])                       # the stress presses along -normal
+        scale = sign * self.area / n                         # eV/Angstrom per particle per (eV/Angstrom^3)
+        if isinstance(self.stress, Constant):
+            expr = f"{float(self.stress.value) * scale!r}"
+        elif isinstance(self.stress, Table):
+            t_ps = self.stress.times / units.PS
+            t0_ps = self.time / units.PS
+            svar = f"{name}_t"
+            form.fixes.append(f'variable        {svar} equal "time+{t0_ps!r}"')
+            u_terms, _ = table_formulas(t_ps, self.stress.values * scale, t0_ps, f"v_{svar}")
+            form.fixes += variable_lines(f"{name}_f", u_terms)
+            expr = f"v_{name}_f"
+        else:
+            raise InputError("atoms.constraints", f"Traction with a {self.stress.law} stress ({self.stress!r})",
+                             "a constant or Table stress (a callable has no LAMMPS form here)")
+        comps = ["NULL"] * 3
+        comps[ax] = expr
+        zero = ["0.0"] * 3
+        zero[ax] = "NULL"
+        form.fixes.append(f"fix             ave_{name} {name} aveforce " + " ".join(comps))
+        form.fixes.append(f"fix             tan_{name} {name} setforce " + " ".join(zero))
+        form.meta[name] = {"kind": "Traction", "n": n, "axis": ax, "area_A2": float(self.area),
+                           "stress": describe_history(self.stress, units.GPa, "GPa")}
+        return form
 
     def __repr__(self):
         return (f"Traction({len(self.index)} particles, normal={self.normal.tolist()}, stress={self.stress!r}, "

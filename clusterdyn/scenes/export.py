@@ -63,7 +63,8 @@ def check_exportable(scene, overrides, v):
     """
     if scene.name not in EXPORTABLE:
         why = ("MCA automata (links that break, Coulomb friction) have no LAMMPS form in this export"
-               if scene.name.startswith("mca") else "no LAMMPS export for this scene")
+               if scene.name.startswith("mca") else "its deck, with the analysis of its dumps, is written by "
+               f"clusterdyn run {scene.name} --engine lammps --deck-only --out DIR")
         raise InputError("scene", scene.name, "a Cluster Dynamics scene with a LAMMPS export: "
                          + ", ".join(EXPORTABLE), hint=why)
     skipped = {}

@@ -191,11 +191,19 @@ def test_drive_fixes_in_the_deck(tmp_path):
     meta = json.loads((tmp_path / "ok" / "cd.json").read_text())
     assert meta["groups"]["wall1"]["K_eV_per_A2"] == [K[0]] and meta["groups"]["piston0"]["law"] == "table"
     bad = [
-        ([Traction(s.piston.index, [-1, 0, 0], 1e-3, area=1.0)], "Traction"),
+        ([Traction(s.piston.index, [-1, 0, 0], 1e-3, velocity=[0.0, 1e-3, 0.0], area=1.0)], "tangential"),
+        ([Traction(s.piston.index, [-0.6, 0.8, 0], 1e-3, area=1.0)], "along x, y or z"),
         ([Wall([0, 0, 0], [1, 0, 0], sticking=True)], "sticking"),
         ([Piston(s.piston.index, lambda t: 1.0)], "callable"),
         ([Wall([0, 0, 0], [0, 1, 0])], "periodic"),
     ]
+    tr = Traction(s.piston.index, [-1, 0, 0], Table([0.0, 1 * units.ns], [0.0, 2e-3]), area=4.0)
+    a.set_constraint(tr)
+    export_lammps(a, s.calc, DampedVerlet(a, timestep=s.dyn.dt, J=None), tmp_path / "tr", nsteps=10, frames=1)
+    text = (tmp_path / "tr" / "in.cd").read_text()
+    assert "fix             ave_traction0 traction0 aveforce v_traction0_f NULL NULL" in text
+    assert "fix             tan_traction0 traction0 setforce NULL 0.0 0.0" in text
+    assert "fix             integrate all nve" in text                  # the layer is integrated, not moved
     for cons, word in bad:
         a.set_constraint(cons)
         with pytest.raises(InputError, match=f"^atoms.constraints=.*{word}") as exc:

@@ -55,4 +55,4 @@ from .export import (BOND_MARK, DATA_FILE, DEFAULT_TABLE_POINTS, INPUT_FILE, MET
                      initial_bond_pairs, lammps_table_forces, pair_lines, table_entry_name, table_grid,
                      table_interpolation_error, type_masses, write_data, write_tables)
 from .run import (NKTV2P_METAL, LammpsRun, frame_atoms, lammps_available, mpirun_path, preload_mpi,  # noqa: F401
-                  read_dump, run_lammps)
+                  read_dump, read_run, run_lammps)

