@@ -99,11 +99,8 @@ def export_scene(scene_name, overrides, out_dir, **kw):
     v = scene.parse(overrides)
     skipped = check_exportable(scene, overrides, v)
     scene.check(v)
-    if v.get("packing") is not None:            # BOUNDARY LAW: no LAMMPS form yet (refused before any work)
-        from .packing import resolve_packing
-        if resolve_packing(v["packing"])["boundaries"] == "law":
-            raise InputError("packing", v["packing"], "a packing without the boundary law for a LAMMPS deck",
-                             hint="the boundary pair law (clusterdyn.md.boundary) has no LAMMPS form in this export")
+    from .packing import refuse_law_on_lammps
+    refuse_law_on_lammps(v)
     out = check_out(out_dir)
     stages = scene.plan(v)
     built = []

@@ -83,6 +83,8 @@ def check_engine(scene, overrides, v):
             raise InputError("--engine", "lammps", f"numba for scene '{scene.name}'", hint=MCA_WHY)
         raise InputError("--engine", "lammps", f"numba for scene '{scene.name}' (lammps runs: "
                          + ", ".join(ENGINE_SCENES) + ")")
+    from .packing import refuse_law_on_lammps
+    refuse_law_on_lammps(v)
     skipped = {}
     for key, (honoured, why) in ENGINE_NOT_HONOURED.items():
         if key not in v:

@@ -74,3 +74,12 @@ def prepare(atoms, spec, rc, relax=None):
             report["released"] = relax(atoms, term)
         report["boundary"] = term.summary()
     return calc, term, report
+
+
+def refuse_law_on_lammps(v):
+    """The boundary pair law has no LAMMPS form yet: a packing that uses it is refused, in one line,
+    by the LAMMPS export and the LAMMPS engine alike (before any work)."""
+    if v.get("packing") is not None and resolve_packing(v["packing"])["boundaries"] == "law":
+        raise InputError("packing", v["packing"], "a packing without the boundary law on LAMMPS",
+                         hint="the boundary pair law (clusterdyn.md.boundary) has no LAMMPS form yet: "
+                              "run it on the numba engine")

@@ -134,3 +134,14 @@ def test_hypervelocity_region_removal(tmp_path):
     assert ra["E_removed"]["value"] > 0 and abs(rb["E_removed"]["value"] / ra["E_removed"]["value"] - 1) < 0.05
     assert abs(rb["hole_diameter"]["value"] / ra["hole_diameter"]["value"] - 1) < 0.02
     assert abs(rb["E_kinetic"]["value"] / ra["E_kinetic"]["value"] - 1) < 0.01
+
+
+def test_the_boundary_law_is_refused_on_lammps_by_name(tmp_path):
+    """A packing with the boundary pair law has no LAMMPS form: refused in one line before any work,
+    by the engine and the export alike (one check, scenes.packing.refuse_law_on_lammps)."""
+    from clusterdyn.cli import main
+    out = tmp_path / "law"
+    for argv in (["run", "spall", "--engine", "lammps", "--deck-only", "--set", "packing=6061-T6", "--out", str(out)],
+                 ["export", "lammps", "spall", "--set", "packing=6061-T6", "--out", str(out)]):
+        assert main(argv) == 2
+    assert not out.exists() or not any(out.iterdir())
