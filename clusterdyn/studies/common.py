@@ -109,10 +109,20 @@ def display_value(param, value):
     return value
 
 
+_HELD_FOLDERS = []          # the study folders this process holds (their locks go with the process)
+
+
 def out_folder(out, study, tag):
-    """``out`` or ``runs/<study>-<tag>`` (created)."""
+    """``out`` or ``runs/<study>-<tag>`` (created).  The default folder is held by this process for
+    the rest of its life (:func:`clusterdyn.scenes.lifecycle.lock_out`: a second process writing it
+    is refused in one line); a given ``out`` is held by the caller (``clusterdyn study --out``)."""
+    from ..scenes.lifecycle import lock_out
     folder = Path(out) if out is not None else Path("runs") / f"{study}-{tag}"
     folder.mkdir(parents=True, exist_ok=True)
+    if out is None:
+        hold = lock_out(folder)
+        hold.__enter__()
+        _HELD_FOLDERS.append(hold)
     return folder
 
 

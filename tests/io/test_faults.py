@@ -212,3 +212,15 @@ def test_an_interrupt_a_library_swallowed_still_stops_the_run(tmp_path, monkeypa
     assert main(["run", "shock", "--quiet", "--out", str(tmp_path / "a")] + TINY) == 130
     assert "interrupted" in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "a" / "result.json").exists()
+
+
+def test_a_study_in_its_default_folder_holds_it(tmp_path, monkeypatch):
+    """A study run without --out writes runs/<study>-<tag>: that folder is locked too (a second
+    process is refused in one line)."""
+    from clusterdyn.studies.common import out_folder
+    monkeypatch.chdir(tmp_path)
+    folder = out_folder(None, "hugoniot", "Al")
+    code = ("from clusterdyn.studies.common import out_folder; out_folder(None, 'hugoniot', 'Al')")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=_env())
+    assert p.returncode != 0 and "no other clusterdyn run is writing" in p.stderr
+    assert (folder / ".clusterdyn.lock").exists()
