@@ -7,25 +7,6 @@ or Python values; ``out`` is the folder for its CSV, PNG and JSON files
 prints its tables (``quiet`` overrides the printing).  It returns a
 JSON-ready dict listing every run.
 
-hugoniot       piston-speed sweep of the shock scene: D-u and P-rho against the
-               experimental Hugoniot and the cold curve; damping, attraction and
-               low-u checks; two-phase samples against the mixture rule
-convergence    error of D against the experiment and the finest run, versus wall
-               time and particle-steps, over sample size, time step, cutoff,
-               noise and r0
-stability      the measured time-step limit (bounded energy error) for u = 0-8 km/s
-mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, hcp,
-               sc and random packings) and the Cluster Dynamics contrast
-mca-degrading  a load / unload / reload cycle of a degrading MCA material
-flow-stress    the flow stress of a CD polycrystal (uniaxial-strain material-point
-               test) against grain size, porosity, rc and boundary cohesion, and the
-               packing closest to a target yield stress
-calibrate      tunes the boundary pair law (docs/theory.md 1.11) to target flow
-               stress and spall strength; writes a packing file
-dusting        numerical dusting of a smooth free surface against u, rc, damping
-               and r0 (the CD paper's figs. 18-20)
-=============  =================================================================
-=======
 ==============  =================================================================
 hugoniot        piston-speed sweep of the shock scene: D-u and P-rho against the
                 experimental Hugoniot and the cold curve; damping, attraction and
