@@ -27,15 +27,17 @@ def test_impact_plates_with_the_law_attach_the_term_and_keep_the_default(tmp_pat
     assert plain["calc"].parameters["attraction"] == "all"
 
 
-def test_tiny_spall_with_a_weak_law_spalls_lower(tmp_path):
+def test_tiny_spall_with_a_weak_law_pulls_back_less(tmp_path):
     common = {"sample": "polycrystal", "flyer": "4", "target": "8", "width": "4", "grain_size": "3.5",
               "frames": "20", "v": "1500m/s", "h5md": "false", "checkpoint_every": "0", "relax_cycles": "2"}
     weak = get_scene("spall").run({**common, "packing": _law_file(tmp_path)}, out=tmp_path / "w", progress=False)
     paper = get_scene("spall").run(common, out=tmp_path / "p", progress=False)
     qw, qp = weak.quantities, paper.quantities
-    print(qw["pc_max_tension"].value, qp["pc_max_tension"].value, qw["pc_ledger_residual"].value)
-    assert qp["pc_max_tension"].value > 1.0                          # GPa: the paper's packing holds tension
-    assert qw["pc_max_tension"].value < 0.5 * qp["pc_max_tension"].value   # the law's weak bonds do not
+    # the pullback (free-surface velocity: the law's forces are in it; its pair stresses are not in the
+    # scenes' stress maps, docs/polycrystal.md)
+    print(qw["pc_spall_strength_cb"].value, qp["pc_spall_strength_cb"].value, qw["pc_ledger_residual"].value)
+    assert qp["pc_spall_strength_cb"].value > 1.0                     # GPa: the paper's packing holds tension
+    assert qw["pc_spall_strength_cb"].value < 0.5 * qp["pc_spall_strength_cb"].value   # the law's weak bonds do not
     assert abs(qw["pc_ledger_residual"].value) < 0.05
 
 
