@@ -666,7 +666,7 @@ def read_history_csv(name, path, kinds=("u",), signed=False):
     the file's own time unit), and
     (unless ``signed``) negative values.  Returns ``(Table, kind)``.
     """
-    from ..md.drives import Table
+    from ..md.histories import Table
     text = str(path)
     if not os.path.isfile(text):
         raise InputError(name, text, "an existing CSV file")
