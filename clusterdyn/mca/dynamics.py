@@ -139,6 +139,7 @@ class MCADynamics(MolecularDynamics):
         self.check_timestep = bool(check_timestep)
         self.stored_work = 0.0
         self.dissipated = 0.0
+        self.plastic_work = 0.0
         n = len(atoms)
         for name in ("omega", "theta"):
             if name not in atoms.arrays:
@@ -287,10 +288,13 @@ class MCADynamics(MolecularDynamics):
                 plastic_degrading.softening(first_n, side_p, st.D_p, soft)
             epsp = st.epsp_n[perm]
             Mn = np.empty(len(perm))
+            wp = np.empty(len(perm))
             changed += plastic.radial_return(s, first_n, side_p, side_s, mid, st.plastic_m,
                                              st.G_m[mid], st.tab_e, st.tab_s, soft, epsp,
-                                             st.sig_p2, st.tau_p2c, Mn)
+                                             st.sig_p2, st.tau_p2c, Mn, st.implicit_m, st.rateC_m,
+                                             st.rate0_m, self.dt, out["omega_n"], wp)
             st.epsp_n[perm] = epsp
+            self.plastic_work += float(wp.sum())
             if fl["plastic_degrading"]:
                 changed += plastic_degrading.degrade_plastic(i_p, j_p, st.linked_p, epsp, st.epsd_p,
                                                              st.epsf_p, st.D_p, st.sig_p2,
@@ -457,6 +461,7 @@ class MCADynamics(MolecularDynamics):
         d = self.state.get_state()
         d["stored_work"] = float(self.stored_work)
         d["dissipated"] = float(self.dissipated)
+        d["plastic_work"] = float(self.plastic_work)
         d["nsteps"] = int(self.nsteps)
         if self._S_mean is not None:
             d["contact_S_mean"] = self._S_mean.copy()
@@ -493,6 +498,7 @@ class MCADynamics(MolecularDynamics):
     def _restore_counters(self, d):
         self.stored_work = float(d.get("stored_work", 0.0))
         self.dissipated = float(d.get("dissipated", 0.0))
+        self.plastic_work = float(d.get("plastic_work", 0.0))
         self.nsteps = int(d.get("nsteps", self.state.step))
         if "contact_S_mean" in d:
             self._S_mean = np.array(d["contact_S_mean"], dtype=float)

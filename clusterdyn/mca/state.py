@@ -27,7 +27,7 @@ from ..neighbors import minimum_image
 from ..build.tessellation import tessellate
 from .kernels import incidence
 from ..materials.mca import check_mca_material
-from .response.plastic import hardening_table
+from .response.plastic import hardening_table, rate_constants
 
 #: per-pair arrays that are history (checkpointed); the rest are set-up constants (also checkpointed)
 PAIR_ARRAYS = ("pid_p2", "linked_p", "S_p", "q0_p2", "r0_p", "sig_p2", "tau_p2c", "dlast_pc", "D_p",
@@ -162,6 +162,10 @@ class MCAState:
         self.plastic_m = np.array([r in ("elastic-plastic", "plastic-degrading") for r in resp], np.int8)
         tabs = [hardening_table(m) if p else (np.array([0.0, 1.0]), np.array([np.inf, np.inf]))
                 for m, p in zip(mats, self.plastic_m)]
+        rc = [rate_constants(m) if p else (0, 0.0, 1.0) for m, p in zip(mats, self.plastic_m)]
+        self.implicit_m = np.array([r[0] for r in rc], np.int8)
+        self.rateC_m = np.array([r[1] for r in rc])
+        self.rate0_m = np.array([r[2] for r in rc])
         k = max(len(t[0]) for t in tabs)
         self.tab_e = np.zeros((len(mats), k))
         self.tab_s = np.zeros((len(mats), k))
