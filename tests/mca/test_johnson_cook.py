@@ -11,7 +11,8 @@ from clusterdyn.mca.response.plastic import hardening_table, jc_flow_stress, joh
 
 
 def _one_automaton(mat, s_dev_int, epsp0, dt):
-    """One automaton with three pairs along x, y, z carrying a uniaxial tensor of intensity s_dev_int."""
+    """One automaton (Omega = 2) with three pairs along x, y, z (q S = Omega: sum q S n n = Omega I)
+    carrying a uniaxial tensor of intensity s_dev_int."""
     e, s = hardening_table(mat)
     tab_e, tab_s = e[None, :], s[None, :]
     imp, C, e0 = rate_constants(mat)
@@ -28,7 +29,8 @@ def _one_automaton(mat, s_dev_int, epsp0, dt):
     n = plastic.radial_return(tens, first, side_p, side_s, np.zeros(1, np.int64), np.ones(1, np.int8),
                               np.array([mat.G]), tab_e, tab_s, np.ones(1), epsp, sig, tau, M,
                               np.array([imp], np.int8), np.array([C]), np.array([e0]), dt,
-                              np.array([2.0]), wp)
+                              np.array([2.0]), wp, np.array([[1.0, 0.0]] * 3), np.full(3, 2.0),
+                              np.array([s_dev_int / 3]), np.array([1 - 2 * mat.G / (3 * mat.K)]))
     return n, epsp[0], M[0], wp[0], sig
 
 
@@ -50,7 +52,7 @@ def test_implicit_return_on_the_johnson_cook_curve():
         P = sint / 3
         assert np.allclose(sig[:, 0], P + (np.array([sint, 0, 0]) - P) * M)
         # plastic work = Omega x (sint + snew) / 2
-        assert abs(wp / (2.0 * x * 0.5 * (sint + snew)) - 1) < 1e-9
+        assert abs(wp / (2.0 * x * 0.5 * (sint + snew)) - 1) < 1e-9      # one pair a side, exact
         # the rate raises the flow stress above the static curve (1 + C ln(rate/eps0))
         assert snew > jc["A"] + jc["B"] * e1 ** jc["n"]
 

@@ -21,9 +21,10 @@ strain hardening is tabulated on a geometric grid (400 points from 1e-6 to
 1e-4); the rate factor is evaluated exactly.
 
 Every return also yields the plastic work of the step, the drop of the
-automaton's deviatoric elastic energy ``Omega (sigma_int^2 - sigma_new^2)/(6G)``
-(= ``Omega x (sigma_int + sigma_new)/2``), summed by the dynamics into its
-energy ledger.
+automaton's elastic energy in its pairs (:func:`clusterdyn.mca.kernels.pair_energy`,
+with the mean stress ``Pv_n`` of the volume change and ``c_n = lambda/K``;
+for a homogeneous field ``Omega (sigma_int^2 - sigma_new^2)/(6G)`` = ``Omega x
+(sigma_int + sigma_new)/2``), summed by the dynamics into its energy ledger.
 """
 
 import math
@@ -58,7 +59,8 @@ def rate_factor(x, dt, C, eps0):
 
 @njit(cache=True)
 def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, tab_s, soft_n,
-                  epsp_n, sig_p2, tau_p2c, M_n, implicit_m, rateC_m, rate0_m, dt, omega_n, wp_n):
+                  epsp_n, sig_p2, tau_p2c, M_n, implicit_m, rateC_m, rate0_m, dt, omega_n, wp_n,
+                  q0_p2, S_p, Pv_n, c_n):
     """Return every yielding automaton to its yield surface; returns the number that yielded.
 
     ``soft_n`` scales the yield stress (1 - D for plastic-degrading, else 1).
@@ -107,13 +109,21 @@ def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, 
             epsp_n[i] += (sint - sy) / (G3 + H)
         M = snew / sint
         M_n[i] = M
-        wp_n[i] = omega_n[i] * (sint * sint - snew * snew) / (2.0 * G3)
+        de = 0.0
+        cP = c_n[i] * Pv_n[i]
         for k in range(first_n[i], first_n[i + 1]):
             p = side_p[k]
             s = side_s[k]
+            v0 = sig_p2[p, s] - cP
+            t0 = tau_p2c[p, s, 0] ** 2 + tau_p2c[p, s, 1] ** 2 + tau_p2c[p, s, 2] ** 2
             sig_p2[p, s] = P + (sig_p2[p, s] - P) * M
+            v1 = sig_p2[p, s] - cP
+            de += q0_p2[p, s] * S_p[p] * (v0 * v0 - v1 * v1 + t0 * (1.0 - M * M))
             for a in range(3):
                 tau_p2c[p, s, a] *= M
+        # the drop of the pairs' elastic energy (kernels.pair_energy, mean stress Pv_n from the
+        # volume): for a homogeneous field Omega (sint^2 - snew^2)/(6G)
+        wp_n[i] = de / (4.0 * G_n[i])
         n += 1
     return n
 
