@@ -18,6 +18,8 @@ stability      the measured time-step limit (bounded energy error) for u = 0-8 k
 mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, hcp,
                sc and random packings) and the Cluster Dynamics contrast
 mca-degrading  a load / unload / reload cycle of a degrading MCA material
+mca-compression-flow  MCA through large strain: a Johnson-Cook cylinder between
+               frictionless platens to 60% strain against the input hardening curve
 flow-stress    the flow stress of a CD polycrystal (uniaxial-strain material-point
                test) against grain size, porosity, rc and boundary cohesion, and the
                packing closest to a target yield stress
@@ -42,6 +44,8 @@ STUDIES = {
                        "fcc, hcp, sc and random packings, and the Cluster Dynamics contrast"),
     "mca-degrading": ("mca:degrading_study:DEGRADING_PARAMS", "a load / unload / reload cycle of a degrading "
                       "MCA material"),
+    "mca-compression-flow": ("mca_flow:compression_flow_study:PARAMS", "MCA large strain: a Johnson-Cook "
+                             "cylinder between frictionless platens to 60% strain against the input curve"),
     "flow-stress": ("flow_stress:flow_stress_study:PARAMS", "flow stress of a CD polycrystal (material-point "
                     "test) against grain size, porosity, rc and boundary cohesion; the packing closest to a target"),
     "dusting": ("dusting:dusting_study:PARAMS", "dispersed clusters of a shocked smooth free surface against u, "

@@ -31,17 +31,21 @@ import numpy as np
 from .. import units
 from ..errors import InputError
 from ..scenes.base import Param
-from .common import format_table, markdown_table, out_folder, parse_params, write_csv, write_json
+from .common import ListParam, format_table, markdown_table, out_folder, parse_params, write_csv, write_json
 
 PARAMS = [
-    Param("across", "6,10,16", "automata across the diameter (comma list)", "list"),
-    Param("material", "Al6061-T6", "MCA material with a Johnson-Cook record"),
-    Param("strain", 0.6, "engineering strain at the end (0 < strain < 0.8)"),
-    Param("transits", 40.0, "run time in elastic transit times H0/c_L (sets the strain rate)"),
-    Param("damping", 0.05, "pair damping (fraction of critical)"),
-    Param("remesh_strain", 0.1, "pair strain that triggers a re-tessellation"),
-    Param("D0", 6.0, "cylinder diameter, mm"),
+    ListParam("across", (6, 10, 16), "automata across the diameter (comma list)", low=4),
+    Param("material", "Al6061-T6", "MCA material with a Johnson-Cook record", kind="str"),
+    Param("strain", 0.6, "engineering strain at the end", low=0.0, high=0.8, low_open=True),
+    Param("transits", 40.0, "run time in elastic transit times H0/c_L (sets the strain rate)", low=1.0),
+    Param("damping", 0.05, "pair damping (fraction of critical)", low=0.0),
+    Param("remesh_strain", 0.1, "pair strain that triggers a re-tessellation", low=0.0, high=0.5, low_open=True),
+    Param("D0", 6.0, "cylinder diameter", unit="mm", low=0.0, low_open=True),
 ]
+
+#: the aims of the check (issue 42): stress within 5% of the curve from 1% true strain on,
+#: volume change below 1% in plastic flow, ledger residual below 1% of the plastic work
+AIM_STRESS, AIM_VOLUME, AIM_LEDGER = 0.05, 0.01, 0.01
 
 
 def _table(times, values):
@@ -146,6 +150,7 @@ def compression_flow(across=6, material="Al6061-T6", strain=0.6, transits=40.0, 
            "seconds": time.perf_counter() - t_start}
     w = (e_true >= 0.01) & (e_true <= e_true.max())
     res["max_error"] = float(np.max(np.abs(sig[w] / target[w] - 1))) if w.any() else float("nan")
+    res["rms_error"] = float(np.sqrt(np.mean((sig[w] / target[w] - 1) ** 2))) if w.any() else float("nan")
     res["mean_error"] = float(np.mean(sig[w] / target[w] - 1)) if w.any() else float("nan")
     plastic = e_true > 0.02
     res["max_volume_change"] = float(np.max(np.abs(vol[plastic]))) if plastic.any() else 0.0
@@ -156,3 +161,83 @@ def compression_flow(across=6, material="Al6061-T6", strain=0.6, transits=40.0, 
     res["ledger_residual_rel"] = float(abs(last["residual"]) / max(last["plastic"], 1e-300))
     res["remeshes"] = dyn.remesh_count
     return res
+
+
+COLUMNS = ["across", "n", "steps", "edot_per_s", "remeshes", "max_error", "mean_error", "rms_error",
+           "max_volume_change", "momentum_rel", "ledger_residual_rel", "seconds"]
+
+
+TABLE = [("across", "across", "g"), ("n", "automata", "d"), ("steps", "steps", "d"),
+         ("edot_per_s", "rate (1/s)", ".3g"), ("remeshes", "switches", "d"),
+         ("max_error", "max |err| 1-60%", "+.3f"), ("mean_error", "mean err", "+.4f"),
+         ("rms_error", "rms err", ".4f"), ("max_volume_change", "max |dV/V|", ".4f"),
+         ("momentum_rel", "|p_xy|/(M U)", ".1e"), ("ledger_residual_rel", "residual/W_p", ".2e"),
+         ("seconds", "wall (s)", ".1f")]
+
+
+def compression_flow_study(overrides=None, out=None, progress=True, quiet=None):
+    """``clusterdyn study mca-compression-flow``: the runs, a table, PNG and CSV (module docstring)."""
+    quiet = (not progress) if quiet is None else quiet
+    v, _ = parse_params(PARAMS, overrides, study="mca-compression-flow")
+    folder = out_folder(out, "mca-compression-flow", v["material"])
+    stream = None if quiet else sys.stdout
+    t0 = time.perf_counter()
+    runs = []
+    for a in v["across"]:
+        r = compression_flow(int(a), v["material"], v["strain"], v["transits"], v["damping"], v["remesh_strain"],
+                             v["D0"], stream=stream)
+        runs.append(r)
+    rows = [{k: r[k] for k in COLUMNS} for r in runs]
+    write_csv(folder / "compression_flow_summary.csv", rows, COLUMNS)
+    curve_rows = []
+    for r in runs:
+        for k in range(len(r["e_true"])):
+            row = r["rows"][k]
+            curve_rows.append({"across": r["across"], "step": row["step"], "e_true": r["e_true"][k],
+                               "stress_MPa": r["stress"][k] / units.GPa * 1e3,
+                               "curve_MPa": r["target"][k] / units.GPa * 1e3, "e_p": r["e_p"][k],
+                               "volume_change": r["volume_change"][k],
+                               "volume_change_all_cells": r["volume_change_cells"][k],
+                               "ledger_residual_J": row["residual"] / units.J,
+                               "plastic_work_J": row["plastic"] / units.J, "p_xy_rel": row["p_xy"] / r["p_scale"]})
+    write_csv(folder / "compression_flow.csv", curve_rows)
+    png = plot_compression(runs, folder / "compression_flow.png")
+    led = [{"across": r["across"], **{k: r["ledger"][k] / units.J for k in r["ledger"]}} for r in runs]
+    write_csv(folder / "compression_flow_ledger.csv", led)
+    text = format_table(rows, TABLE, title="MCA cylinder between frictionless platens (true stress vs the "
+                        "Johnson-Cook curve)")
+    if stream:
+        print(text, file=stream)
+    (folder / "compression_flow.md").write_text(markdown_table(rows, TABLE) + "\n")
+    res = {"study": "mca-compression-flow", "material": v["material"], "rows": rows,
+           "aims": {"stress": AIM_STRESS, "volume": AIM_VOLUME, "ledger": AIM_LEDGER},
+           "files": [str(folder / f) for f in ("compression_flow.csv", "compression_flow_summary.csv",
+                                               "compression_flow_ledger.csv", "compression_flow.md")] + [str(png)],
+           "wall_time_s": time.perf_counter() - t0}
+    write_json(folder / "result.json", res)
+    return res
+
+
+def plot_compression(runs, path):
+    from ..scenes.common import matplotlib_agg
+    plt = matplotlib_agg()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.5, 7.0), sharex=True, gridspec_kw={"height_ratios": [3, 1.4]})
+    mpa = units.GPa / 1e3
+    for r in runs:
+        a1.plot(r["e_true"], r["stress"] / mpa, "-", lw=1.2, label=f"MCA, {r['across']} across ({r['n']} automata)")
+        a2.plot(r["e_true"], 100 * r["volume_change"], "-", lw=1.0, label=f"{r['across']} across")
+    r = runs[-1]
+    a1.plot(r["e_true"], r["target"] / mpa, "k--", lw=1.5, label="input Johnson-Cook curve at the run's rate")
+    a1.fill_between(r["e_true"], 0.95 * r["target"] / mpa, 1.05 * r["target"] / mpa, color="0.85", label="+-5%")
+    a1.set_ylabel("axial true stress (MPa)")
+    a1.set_ylim(0, 1.6 * float(np.max(r["target"])) / mpa)
+    a1.legend(fontsize=8, loc="lower right")
+    a1.set_title(f"{r['material'].name}: cylinder between frictionless platens, "
+                 f"{r['edot_per_s']:.3g}/s", fontsize=9)
+    a2.axhline(0, color="k", lw=0.5)
+    a2.set_ylabel("volume change (%)")
+    a2.set_xlabel("true strain ln(H0/H)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
