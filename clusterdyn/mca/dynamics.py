@@ -531,6 +531,7 @@ class MCADynamics(MolecularDynamics):
         K.log_volume(out["d_pc"], st.q0_p2, st.S_p, st.linked_p, first_n, side_p, side_s, lnJ)
         Kn = st.K_m[st.mat_id_n[perm]]
         delta = (lnJ - st.lnJ_n[perm]) - (st.P_n[perm] - st.Pref_n[perm]) / Kn
+        delta[~np.isfinite(delta)] = 0.0       # flat neighbourhoods (kernels.log_volume): no sync
         if not len(delta) or np.max(np.abs(delta)) <= (self.volume_tol if tol is None else tol):
             return 0
         e0 = self._pair_energy(out["s_ncc"])

@@ -425,7 +425,8 @@ def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
     """``ln sqrt(det B_i)``, ``B_i = sum_j q_ij S_ij d_ij (x) d_ij`` over the linked pairs of every
     automaton (large strain, docs/mca.md): under any affine motion of the neighbourhood,
     ``B -> F B F^T``, so the change of this number is exactly ``ln det F`` (an isochoric flow
-    changes it by nothing at any strain, where the summed pair elongations change by O(strain^2))."""
+    changes it by nothing at any strain, where the summed pair elongations change by O(strain^2)).
+    NaN where the neighbourhood is flat (det B below 1e-9 of (tr B / 3)^3)."""
     for i in range(first_n.shape[0] - 1):
         b00 = 0.0
         b01 = 0.0
@@ -449,5 +450,7 @@ def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
             b22 += w * z * z
         det = (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
                + b02 * (b01 * b12 - b11 * b02))
-        lnJ_n[i] = 0.5 * math.log(det) if det > 0.0 else -1e300
+        tr = (b00 + b11 + b22) / 3.0
+        # a flat neighbourhood (all pairs in a plane, or none) has no volume: NaN (no sync)
+        lnJ_n[i] = 0.5 * math.log(det) if det > 1e-9 * tr * tr * tr and tr > 0.0 else math.nan
 

@@ -95,7 +95,11 @@ class MCAState:
         if len(np.unique(ids)) != len(ids):
             raise InputError("id", "duplicates", "unique particle ids")
         pos = atoms.get_positions()
-        geom = tessellate(pos, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, self.dim)
+        if atoms.info.get("mca_closure") == "body" and not np.any(atoms.pbc):
+            from ..build.tessellation import tessellate_body     # carved shapes (build.mca)
+            geom = tessellate_body(pos, atoms.arrays["radius"], self.dim)
+        else:
+            geom = tessellate(pos, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, self.dim)
         self.box_c, self.periodic_c = _box(atoms)
         i, j = geom["i_p"], geom["j_p"]
         npair = len(i)
