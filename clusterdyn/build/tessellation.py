@@ -216,6 +216,43 @@ def surface_ghosts(pos, d, dim=3, gap=0.85):
     return np.vstack([cand, grid[on_shell]])
 
 
+def _ridge_areas(ridge_vertices, vert, normals, dim):
+    """Areas of the ridges (convex polygons, 3D) or lengths (2D), vectorised; NaN where unbounded."""
+    cnt = np.array([len(v) for v in ridge_vertices], np.int64)
+    flat = np.fromiter((x for v in ridge_vertices for x in v), np.int64, count=int(cnt.sum()))
+    rid = np.repeat(np.arange(len(cnt)), cnt)
+    bad = np.zeros(len(cnt), bool)
+    np.logical_or.at(bad, rid, flat < 0)
+    flat = np.where(flat < 0, 0, flat)
+    pts = vert[flat][:, :dim]
+    if dim == 2:
+        first = np.cumsum(cnt) - cnt
+        out = np.linalg.norm(pts[first + 1] - pts[first], axis=1)
+        out[bad] = np.nan
+        return out
+    cen = np.zeros((len(cnt), 3))
+    np.add.at(cen, rid, pts)
+    cen /= cnt[:, None]
+    rel = pts - cen[rid]
+    first = np.cumsum(cnt) - cnt
+    u = rel[first]
+    u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+    w = np.cross(normals, u)
+    x = np.einsum("ka,ka->k", rel, u[rid])
+    y = np.einsum("ka,ka->k", rel, w[rid])
+    order = np.lexsort((np.arctan2(y, x), rid))
+    x, y = x[order], y[order]
+    # the next vertex around each polygon (wrapping within its ridge)
+    nxt = np.arange(len(x)) + 1
+    last = np.cumsum(cnt) - 1
+    nxt[last] = first
+    out = np.zeros(len(cnt))
+    np.add.at(out, rid, x * y[nxt] - y * x[nxt])
+    out = 0.5 * np.abs(out)
+    out[bad] = np.nan
+    return out
+
+
 def tessellate_body(positions, radius, dim=3, gap=0.85):
     """Voronoi pairs and geometry of a deformed body of any shape (no periodic axes).
 
@@ -244,13 +281,11 @@ def tessellate_body(positions, radius, dim=3, gap=0.85):
     b = rp[:, 1]
     dvec = pts[b] - pts[a]
     r = np.linalg.norm(dvec, axis=1)
-    area = np.empty(len(rp))
-    for k, verts in enumerate(rv):
-        if -1 in verts:
-            raise InputError("atoms", f"automaton {min(a[k], b[k])}",
-                             "a body closed by its ghost shell (an unbounded Voronoi cell)")
-        vv = vert[verts]
-        area[k] = _polygon_area_3d(vv, dvec[k] / r[k]) if dim == 3 else float(np.linalg.norm(vv[1] - vv[0]))
+    area = _ridge_areas(rv, vert, dvec / r[:, None], dim)
+    if np.any(np.isnan(area)):
+        k = int(np.nonzero(np.isnan(area))[0][0])
+        raise InputError("atoms", f"automaton {min(a[k], b[k])}",
+                         "a body closed by its ghost shell (an unbounded Voronoi cell)")
     q = 0.5 * r
     vcell = np.zeros(n)
     ra, rb = a < n, b < n
