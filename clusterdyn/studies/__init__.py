@@ -20,6 +20,7 @@ mca-elasticity MCA's packing-independent elastic constants (E, nu, K, G on fcc, 
 mca-degrading  a load / unload / reload cycle of a degrading MCA material
 mca-compression-flow  MCA through large strain: a Johnson-Cook cylinder between
                frictionless platens to 60% strain against the input hardening curve
+mca-taylor     every room-temperature 6061-T6 Taylor test with the MCA rod
 flow-stress    the flow stress of a CD polycrystal (uniaxial-strain material-point
                test) against grain size, porosity, rc and boundary cohesion, and the
                packing closest to a target yield stress
@@ -46,6 +47,8 @@ STUDIES = {
                       "MCA material"),
     "mca-compression-flow": ("mca_flow:compression_flow_study:PARAMS", "MCA large strain: a Johnson-Cook "
                              "cylinder between frictionless platens to 60% strain against the input curve"),
+    "mca-taylor": ("mca_taylor:taylor_study:PARAMS", "every room-temperature 6061-T6 Taylor test with the MCA "
+                   "rod (Johnson-Cook, large strain): Lf/L0, Df/D0 against the tests, error against wall time"),
     "flow-stress": ("flow_stress:flow_stress_study:PARAMS", "flow stress of a CD polycrystal (material-point "
                     "test) against grain size, porosity, rc and boundary cohesion; the packing closest to a target"),
     "dusting": ("dusting:dusting_study:PARAMS", "dispersed clusters of a shocked smooth free surface against u, "
