@@ -96,6 +96,16 @@ class MCADynamics(MolecularDynamics):
         pair damping (half-step velocities, both half kicks around a time) and its work
         accumulates in ``contact.friction_work``; pairs across bodies leave the pair table.
 
+    remesh_strain : float in (0, 0.5) or None (default: off)
+        Large strain (docs/theory.md 2.7): re-tessellate (:meth:`remesh`) when a linked
+        pair's strain exceeds it; the exact-volume sync (:meth:`_volume_sync`) then runs at
+        every commit.  3D bodies without periodic axes.
+    remesh_every : int, steps between re-tessellations (0 = off), alone or with ``remesh_strain``
+    h_link : float, new pairs of a re-tessellation link when their overlap
+        ``r - (r_i + r_j)`` is below ``h_link (r_i + r_j)`` (default 0.5)
+
+    The energy ledger of any run is :meth:`ledger`.
+
     In 2D plane strain (``dim=2``) the drives' directions must lie in the x-y
     plane; a :class:`~clusterdyn.md.Traction` without an area gets the
     periodic cell length across its normal times the unit thickness (1 Angstrom).
