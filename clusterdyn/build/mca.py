@@ -209,6 +209,12 @@ def mca_packing(material, d, shape, packing="fcc", pbc=False, seed=0, phi=None, 
     atoms.info["mca_dim"] = dim
     atoms.info["mca_packing"] = packing
     atoms.info["mca_d"] = d
+    if shp is not None and dim == 3 and not pbc3.any():
+        # a shape carved from the lattice: its surface is not a cell face, so the cells are
+        # closed by ghosts at the body's own surface (build.tessellation.tessellate_body), for
+        # the masses and the MCA state alike (mirror planes at the box would give the surface
+        # automata cells out to the box: a 6-across cylinder weighed 1.9 times its mass)
+        atoms.info["mca_closure"] = "body"
     set_masses(atoms)
     return atoms
 
@@ -216,7 +222,11 @@ def mca_packing(material, d, shape, packing="fcc", pbc=False, seed=0, phi=None, 
 def set_masses(atoms):
     """Masses ``rho * V_cell`` from the tessellation (2D: area times unit thickness)."""
     dim = atoms.info.get("mca_dim", 3)
-    g = tessellate(atoms.positions, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, dim)
+    if atoms.info.get("mca_closure") == "body":
+        from .tessellation import tessellate_body
+        g = tessellate_body(atoms.positions, atoms.arrays["radius"], dim)
+    else:
+        g = tessellate(atoms.positions, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, dim)
     rho = np.array([m.rho0 for m in atoms.info["mca_materials"]])[atoms.arrays["material"]]
     atoms.set_masses(rho * g["vcell_n"])
     return atoms

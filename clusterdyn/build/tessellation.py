@@ -181,3 +181,126 @@ def consistency(geom, positions, cell, pbc, dim=3):
     np.add.at(A, i, w * geom["q_p2"][:, 0, None, None])
     np.add.at(A, j, w * geom["q_p2"][:, 1, None, None])
     return A / geom["omega_n"][:, None, None]
+
+
+_DIRS26 = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
+                    if (a, b, c) != (0, 0, 0)], float)
+_DIRS26 /= np.linalg.norm(_DIRS26, axis=1)[:, None]
+
+
+def surface_ghosts(pos, d, dim=3, gap=0.85):
+    """Ghost points closing a body of any shape: candidates at distance ``d`` from every
+    automaton along the 26 (2D: 8) lattice directions, kept where no automaton is within
+    ``gap * d`` (empty space), thinned to one per cell of size 0.35 d; plus a coarse far
+    shell (spacing 2 d, 4 d beyond the bounding box) so that every cell is bounded."""
+    from scipy.spatial import cKDTree
+    dirs = _DIRS26 if dim == 3 else _DIRS26[_DIRS26[:, 2] == 0][:, :2] / 1.0
+    if dim == 2:
+        dirs = dirs / np.linalg.norm(dirs, axis=1)[:, None]
+    tree = cKDTree(pos)
+    cand = (pos[:, None, :] + d * dirs[None, :, :]).reshape(-1, dim)
+    dist, _ = tree.query(cand, k=1)
+    cand = cand[dist >= gap * d]
+    if len(cand):
+        key = np.floor(cand / (0.35 * d)).astype(np.int64)
+        _, first = np.unique(key, axis=0, return_index=True)
+        cand = cand[np.sort(first)]
+    lo = pos.min(axis=0) - 4.0 * d
+    hi = pos.max(axis=0) + 4.0 * d
+    axes = [np.linspace(lo[a], hi[a], max(2, int(np.ceil((hi[a] - lo[a]) / (2.0 * d))) + 1))
+            for a in range(dim)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
+    on_shell = np.zeros(len(grid), bool)
+    for a in range(dim):
+        on_shell |= np.isclose(grid[:, a], lo[a]) | np.isclose(grid[:, a], hi[a])
+    return np.vstack([cand, grid[on_shell]])
+
+
+def _ridge_areas(ridge_vertices, vert, normals, dim):
+    """Areas of the ridges (convex polygons, 3D) or lengths (2D), vectorised; NaN where unbounded."""
+    cnt = np.array([len(v) for v in ridge_vertices], np.int64)
+    flat = np.fromiter((x for v in ridge_vertices for x in v), np.int64, count=int(cnt.sum()))
+    rid = np.repeat(np.arange(len(cnt)), cnt)
+    bad = np.zeros(len(cnt), bool)
+    np.logical_or.at(bad, rid, flat < 0)
+    flat = np.where(flat < 0, 0, flat)
+    pts = vert[flat][:, :dim]
+    if dim == 2:
+        first = np.cumsum(cnt) - cnt
+        out = np.linalg.norm(pts[first + 1] - pts[first], axis=1)
+        out[bad] = np.nan
+        return out
+    cen = np.zeros((len(cnt), 3))
+    np.add.at(cen, rid, pts)
+    cen /= cnt[:, None]
+    rel = pts - cen[rid]
+    first = np.cumsum(cnt) - cnt
+    u = rel[first]
+    u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+    w = np.cross(normals, u)
+    x = np.einsum("ka,ka->k", rel, u[rid])
+    y = np.einsum("ka,ka->k", rel, w[rid])
+    order = np.lexsort((np.arctan2(y, x), rid))
+    x, y = x[order], y[order]
+    # the next vertex around each polygon (wrapping within its ridge)
+    nxt = np.arange(len(x)) + 1
+    last = np.cumsum(cnt) - 1
+    nxt[last] = first
+    out = np.zeros(len(cnt))
+    np.add.at(out, rid, x * y[nxt] - y * x[nxt])
+    out = 0.5 * np.abs(out)
+    out[bad] = np.nan
+    return out
+
+
+def tessellate_body(positions, radius, dim=3, gap=0.85):
+    """Voronoi pairs and geometry of a deformed body of any shape (no periodic axes).
+
+    The re-tessellation of large-strain MCA (docs/theory.md 2.7): the body is
+    closed by :func:`surface_ghosts` instead of mirror planes; faces with ghosts
+    are the free surface (dropped), and ``vcell_n`` (the cell volume, faces with
+    ghosts included) is the automaton's current volume.  Returns the dict of
+    :func:`tessellate` (``q_p2`` = r/2 on both sides: Voronoi faces bisect) plus
+    ``r_p`` the distances.
+    """
+    pos = np.asarray(positions, float)[:, :dim]
+    n = len(pos)
+    if n < dim + 2:
+        raise InputError("atoms", f"{n} automata", f"at least {dim + 2} automata for a tessellation")
+    d = 2.0 * float(np.mean(radius))
+    ghosts = surface_ghosts(pos, d, dim, gap)
+    pts = np.vstack([pos, ghosts])
+    vor = Voronoi(pts)
+    rp = vor.ridge_points
+    real = rp < n
+    sel = real[:, 0] | real[:, 1]
+    rp = rp[sel]
+    rv = [vor.ridge_vertices[k] for k in np.nonzero(sel)[0]]
+    vert = vor.vertices
+    a = rp[:, 0]
+    b = rp[:, 1]
+    dvec = pts[b] - pts[a]
+    r = np.linalg.norm(dvec, axis=1)
+    area = _ridge_areas(rv, vert, dvec / r[:, None], dim)
+    if np.any(np.isnan(area)):
+        k = int(np.nonzero(np.isnan(area))[0][0])
+        raise InputError("atoms", f"automaton {min(a[k], b[k])}",
+                         "a body closed by its ghost shell (an unbounded Voronoi cell)")
+    q = 0.5 * r
+    vcell = np.zeros(n)
+    ra, rb = a < n, b < n
+    np.add.at(vcell, a[ra], q[ra] * area[ra] / dim)
+    np.add.at(vcell, b[rb], q[rb] * area[rb] / dim)
+    both = ra & rb
+    i = np.minimum(a[both], b[both])
+    j = np.maximum(a[both], b[both])
+    order = np.lexsort((j, i))
+    i, j = i[order], j[order]
+    S = area[both][order]
+    rr = r[both][order]
+    q2 = np.stack([0.5 * rr, 0.5 * rr], axis=1)
+    omega = np.zeros(n)
+    np.add.at(omega, i, q2[:, 0] * S / dim)
+    np.add.at(omega, j, q2[:, 1] * S / dim)
+    return {"i_p": i.astype(np.int64), "j_p": j.astype(np.int64), "S_p": S, "q_p2": q2,
+            "omega_n": omega, "vcell_n": vcell, "r_p": rr}

@@ -23,6 +23,9 @@ MCA-specific parameters live in ``Material.extra``:
     damage reached at sigma_c where the pair unlinks (default 0.8)
 ``eps_d``, ``eps_f``
     plastic strain at onset / end of degradation (response "plastic-degrading", Fig. 3d)
+``johnson_cook``
+    dict A, B (eV/Angstrom^3), n, C, eps0 (1/s): J2 flow with the Johnson-Cook curve and an
+    implicit radial return (:mod:`clusterdyn.mca.response.plastic`); ``Al6061-T6``
 """
 
 from .. import units
@@ -107,6 +110,21 @@ def _al6061():
                 "(perfectly plastic unless a hardening curve is given); docs/theory.md 2.5"))
 
 
+def _al6061_t6():
+    g = units.GPa
+    jc = {"A": 0.324 * g, "B": 0.114 * g, "n": 0.42, "C": 0.002, "eps0": 1.0}
+    return mca_material(
+        "Al6061-T6", 2.7, 69.0, 0.33, sigma_y_GPa=0.324, response="elastic-plastic",
+        hardening=None, mu=0.3, johnson_cook=jc,
+        source=("Aluminium alloy 6061-T6 with Johnson-Cook strength: A 324 MPa, B 114 MPa, "
+                "n 0.42, C 0.002, eps0 1/s (thermal term m 1.34, T_melt 925 K not modelled): "
+                "D. R. Lesuer, G. J. Kay, M. M. LeBlanc, Modeling large-strain, high-rate "
+                "deformation in metals, LLNL report UCRL-JC-134118 (2001), table of Johnson-Cook "
+                "constants, the set used for 6061-T6 Taylor-test simulations; B and n as in Sandia's "
+                "Payette material database (al_6061.py, 'power law hardening' 114e6 Pa, 0.42). "
+                "rho 2.7 g/cm3, E 69 GPa, nu 0.33 as Al6061 (ASM Handbook vol. 2, 1990)"))
+
+
 def _copper():
     return mca_material(
         "copper", 8.96, 120.0, 0.34, sigma_y_GPa=0.07, response="elastic-plastic",
@@ -115,7 +133,8 @@ def _copper():
                 "rho 8.96 g/cm3, E 120 GPa, nu 0.34, yield 0.07 GPa; docs/theory.md 2.5"))
 
 
-MCA_MATERIALS = {"alumina": _alumina, "concrete": _concrete, "Al6061": _al6061, "copper": _copper}
+MCA_MATERIALS = {"alumina": _alumina, "concrete": _concrete, "Al6061": _al6061,
+                 "Al6061-T6": _al6061_t6, "copper": _copper}
 
 for _name, _builder in MCA_MATERIALS.items():
     register_material(_name, _builder)

@@ -165,5 +165,29 @@ class MCA(Calculator):
                 "d_pc": d_pc, "r_p": r_p, "arm_p2": arm_p2, "theta_nc": theta, "omega_n": omega_n,
                 "i_p": i_p, "j_p": j_p, "perm": perm, "dP_n": dP}
 
+    def wall_defaults(self, atoms):
+        """Default stiffness K and reach d_c of a :class:`~clusterdyn.md.Wall`, per material.
+
+        The wall stands in for the mirror image of a touching automaton: a
+        half automaton (length d/2) in uniaxial strain on a flat face of
+        area d^2 (a (100) face of the fcc packing has one automaton per d^2),
+        ``k = M d^2 / (d/2) = 2 M d`` with ``M = K + 4G/3``; the harmonic wall
+        ``E = K_w (d_c - x)^2`` has stiffness ``2 K_w``, so ``K_w = M d`` and
+        ``d_c = d/2`` (the face touches the wall where the centre is d/2 away).
+        d is the mean automaton size of each material.
+        """
+        from .state import mca_materials_of
+        mats = mca_materials_of(atoms, self.materials)
+        rad = np.asarray(atoms.arrays["radius"], float)
+        mid = np.asarray(atoms.arrays["material"], np.int64)
+        K = np.empty(len(mats))
+        dc = np.empty(len(mats))
+        for m, mat in enumerate(mats):
+            sel = mid == m
+            d = 2.0 * float(rad[sel].mean() if sel.any() else rad.mean())
+            K[m] = (mat.K + 4.0 * mat.G / 3.0) * d
+            dc[m] = 0.5 * d
+        return K, dc
+
     def get_torques(self, atoms=None):
         return self.get_property("torques", atoms)

@@ -97,17 +97,25 @@ class MCADynamics(MolecularDynamics):
         its normal force joins the conservative forces, its friction is evaluated like the
         pair damping (half-step velocities, both half kicks around a time) and its work
         accumulates in ``contact.friction_work``; pairs across bodies leave the pair table.
+    remesh_strain : float in (0, 0.5) or None (default: off)
+        Large strain (docs/theory.md 2.7): re-tessellate (:meth:`remesh`) when a linked
+        pair's strain exceeds it; the exact-volume sync (:meth:`_volume_sync`) then runs at
+        every commit.  3D bodies without periodic axes.
+    remesh_every : int, steps between re-tessellations (0 = off), alone or with ``remesh_strain``
+    h_link : float, new pairs of a re-tessellation link when their overlap
+        ``r - (r_i + r_j)`` is below ``h_link (r_i + r_j)`` (default 0.5)
 
     Notes
     -----
+    The energy ledger of any run is :meth:`ledger`.
     In 2D plane strain (``dim=2``) the drives' directions must lie in the x-y
     plane; a :class:`~clusterdyn.md.Traction` without an area gets the
     periodic cell length across its normal times the unit thickness (1 Angstrom).
     """
 
     def __init__(self, atoms, timestep=None, *, damping=0.0, contact_every=25, check_timestep=True,
-                 hold_layer_rotation=False, state=None, contact=None, trajectory=None, logfile=None,
-                 loginterval=1, **kw):
+                 hold_layer_rotation=False, state=None, contact=None, remesh_strain=None,
+                 remesh_every=0, h_link=0.5, trajectory=None, logfile=None, loginterval=1, **kw):
         calc = atoms.calc
         from .calculator import MCA
         if not isinstance(calc, MCA):
@@ -143,6 +151,27 @@ class MCADynamics(MolecularDynamics):
         self.check_timestep = bool(check_timestep)
         self.stored_work = 0.0
         self.dissipated = 0.0
+        self.plastic_work = 0.0
+        self.switch_energy = 0.0
+        self.split_work = 0.0
+        self.volume_energy = 0.0
+        self.volume_syncs = 0
+        self.volume_tol = 5e-5
+        self.remesh_count = 0
+        self.remesh_log = []
+        if remesh_strain is not None and not 0.0 < remesh_strain < 0.5:
+            raise InputError("remesh_strain", remesh_strain, "None (off) or a pair strain in (0, 0.5)")
+        if not (isinstance(remesh_every, (int, np.integer)) and remesh_every >= 0):
+            raise InputError("remesh_every", remesh_every, "an integer number of steps >= 0 (0 = off)")
+        if not 0.0 <= h_link:
+            raise InputError("h_link", h_link, "an overlap fraction >= 0")
+        if (remesh_strain is not None or remesh_every) and st.dim != 3:
+            raise InputError("remesh_strain", remesh_strain, "None in 2D (the large-strain switching is 3D)")
+        if (remesh_strain is not None or remesh_every) and contact is not None:
+            raise InputError("remesh_strain", remesh_strain, "None with a segment contact (2D bodies)")
+        self.remesh_strain = None if remesh_strain is None else float(remesh_strain)
+        self.remesh_every = int(remesh_every)
+        self.h_link = float(h_link)
         n = len(atoms)
         for name in ("omega", "theta"):
             if name not in atoms.arrays:
@@ -152,9 +181,16 @@ class MCADynamics(MolecularDynamics):
         self._F = None
         self._setup_masses()
         self._evaluate(commit=False)
+        if self.remeshing and state is None and st.step == 0:
+            self.remesh()                # the body's own closure from the first step (docs/mca.md)
+            self.remesh_count = 0
+            self.switch_energy = 0.0
+            self.remesh_log = []
         self._Fd = self._Td = None
         if self.damping > 0:        # the first half kick's damping: present velocities
             self._Fd, self._Td = self._damping_forces(atoms.get_velocities(), atoms.arrays["omega"])
+        kt0, kr0 = self.kinetic_energy()
+        self._E_initial = kt0 + kr0 + self.elastic_energy()
         self._Ff = self._Tf = None
         if self._friction_on:       # the first half kick's friction: present velocities, history kept
             self._Ff, self._Tf = contact.friction(atoms, st, atoms.get_velocities(), atoms.arrays["omega"],
@@ -278,6 +314,7 @@ class MCADynamics(MolecularDynamics):
         st.tau_p2c = out["tau_p2c"]
         st.dlast_pc = out["d_pc"]
         st.thlast_nc[perm] = out["theta_nc"]
+        st.P_n[perm] += out["dP_n"]
         i_p, j_p, first_n, side_p, side_s, _ = st.pair_rows(self.atoms)
         s = out["s_ncc"]
         changed = 0
@@ -291,10 +328,15 @@ class MCADynamics(MolecularDynamics):
                 plastic_degrading.softening(first_n, side_p, st.D_p, soft)
             epsp = st.epsp_n[perm]
             Mn = np.empty(len(perm))
+            wp = np.empty(len(perm))
+            Gm, Km = st.G_m[mid], st.K_m[mid]
             changed += plastic.radial_return(s, first_n, side_p, side_s, mid, st.plastic_m,
                                              st.G_m[mid], st.tab_e, st.tab_s, soft, epsp,
-                                             st.sig_p2, st.tau_p2c, Mn)
+                                             st.sig_p2, st.tau_p2c, Mn, st.implicit_m, st.rateC_m,
+                                             st.rate0_m, self.dt, out["omega_n"], wp, st.q0_p2, st.S_p,
+                                             np.ascontiguousarray(st.P_n[perm]), 1.0 - 2.0 * Gm / (3.0 * Km))
             st.epsp_n[perm] = epsp
+            self.plastic_work += float(wp.sum())
             if fl["plastic_degrading"]:
                 changed += plastic_degrading.degrade_plastic(i_p, j_p, st.linked_p, epsp, st.epsd_p,
                                                              st.epsf_p, st.D_p, st.sig_p2,
@@ -305,6 +347,8 @@ class MCADynamics(MolecularDynamics):
         elif fl["fracture"]:
             changed += brittle.fracture(i_p, j_p, st.linked_p, s, st.sigc_p, st.beta_p, st.sig_p2,
                                         st.tau_p2c, self.broken_now)
+        if st.lnJ_n is not None:
+            changed += self._volume_sync(out, i_p, j_p, first_n, side_p, side_s, perm)
         if fl["healing"]:
             welded = np.zeros(P, np.int8)
             nw = healing.weld(st.linked_p, st.sig_p2, out["r_p"], st.r0_p, st.sigw_p, st.nweld_p,
@@ -402,10 +446,15 @@ class MCADynamics(MolecularDynamics):
         if st.flags["contacts"] and self.contact_every > 0 and st.step % self.contact_every == 0:
             self._contacts()
         out = self._evaluate(commit=True)
-        self._check(out)
         F1, T1 = self._F, self._T
-        self.stored_work -= 0.5 * (np.sum((F0 + out_f_trial(out, F1)) * dx)
-                                   + np.sum((T0 + T1) * dth))
+        f_tr = out_f_trial(out, F1)
+        self.stored_work -= 0.5 * (np.sum((F0 + f_tr) * dx) + np.sum((T0 + T1) * dth))
+        if f_tr is not F1:                     # the kick uses the corrected forces (O(dt) term)
+            self.split_work += 0.5 * float(np.sum((f_tr - F1) * dx))
+        if self.remeshing and self._remesh_due(out):
+            out = self.remesh()
+            F1, T1 = self._F, self._T
+        self._check(out)
         Fe, Te = F1, T1
         if self.damping > 0:
             fd, td = self._damping_forces(p / m, w)
@@ -427,6 +476,141 @@ class MCADynamics(MolecularDynamics):
         atoms.set_momenta(p, apply_constraint=False)
         atoms.arrays["omega"][:] = w
         return F1
+
+    # ------------------------------------------------------------------ large strain
+    @property
+    def remeshing(self):
+        return self.remesh_strain is not None or self.remesh_every > 0
+
+    def _remesh_due(self, out):
+        st = self.state
+        if self.remesh_every and st.step % self.remesh_every == 0:
+            return True
+        if self.remesh_strain is not None:
+            lk = st.linked_p == 1
+            if lk.any():
+                strain = np.abs(out["r_p"][lk] - st.r0_p[lk]) / st.r0_p[lk]
+                return bool(strain.max() > self.remesh_strain)
+        return False
+
+    def remesh(self):
+        """Re-tessellate now (:meth:`MCAState.retessellate`); returns the new evaluation.
+
+        The forces change at fixed positions (no work); the change of the
+        automata's elastic energy counts in :attr:`switch_energy` (energy
+        removed by switching, eV), so the ledger (:meth:`ledger`) closes.
+        """
+        st = self.state
+        e0 = self.elastic_energy()
+        perm = st.pair_rows(self.atoms)[5]
+        if st.lnJ_n is not None:            # the volume the pairs' linear strains missed since the last sync
+            i_p, j_p, first_n, side_p, side_s, _ = st.pair_rows(self.atoms)
+            if self._volume_sync(self.trial, i_p, j_p, first_n, side_p, side_s, perm, tol=0.0):
+                self._evaluate(commit=False)
+                e0 = self.elastic_energy()
+        info = st.retessellate(self.atoms, self.trial["s_ncc"], self.h_link)
+        st.lnJ_n = np.empty(len(self.atoms))
+        st.lnJ_n[perm] = self._log_volume()
+        st.Pref_n = st.P_n.copy()
+        self._nl = None
+        self._S_mean = None
+        self._setup_masses()
+        out = self._evaluate(commit=False)
+        de = e0 - self.elastic_energy()
+        self.switch_energy += de
+        self.remesh_count += 1
+        info.update(step=int(st.step), energy_change=-de)
+        self.remesh_log.append(info)
+        return out
+
+    def elastic_energy(self):
+        """Elastic energy stored in the linked pairs (eV; :func:`kernels.pair_energy`)."""
+        return self._pair_energy(None)
+
+    def _volume_sync(self, out, i_p, j_p, first_n, side_p, side_s, perm, tol=None):
+        """Large strain: give every automaton the volume change its pairs' linear strains missed.
+
+        ``delta_i = (ln J_i - ln J_i,ref) - (P_i - P_i,ref)/K_i``, the exact volume change
+        (:func:`kernels.log_volume`) since the last sync less the one the mean stress
+        has seen; where ``max |delta| > volume_tol`` every linked pair side of i gets
+        ``K_i delta_i`` (a pure pressure change: ``2G/3 delta`` in the strain, ``K delta`` in
+        P) and the references are reset.  A commit-time correction like the radial
+        return: its energy change at fixed positions is counted in :attr:`volume_energy`.
+        Returns 1 if applied, else 0.
+        """
+        st = self.state
+        lnJ = np.empty(len(perm))
+        K.log_volume(out["d_pc"], st.q0_p2, st.S_p, st.linked_p, first_n, side_p, side_s, lnJ)
+        Kn = st.K_m[st.mat_id_n[perm]]
+        delta = (lnJ - st.lnJ_n[perm]) - (st.P_n[perm] - st.Pref_n[perm]) / Kn
+        delta[~np.isfinite(delta)] = 0.0       # flat neighbourhoods (kernels.log_volume): no sync
+        if not len(delta) or np.max(np.abs(delta)) <= (self.volume_tol if tol is None else tol):
+            return 0
+        e0 = self._pair_energy(out["s_ncc"])
+        dP = Kn * delta
+        lk = st.linked_p == 1
+        st.sig_p2[lk, 0] += dP[i_p[lk]]
+        st.sig_p2[lk, 1] += dP[j_p[lk]]
+        st.P_n[perm] += dP
+        st.lnJ_n[perm] = lnJ
+        st.Pref_n = st.P_n.copy()
+        self.volume_energy += e0 - self._pair_energy(out["s_ncc"])
+        self.volume_syncs += 1
+        return 1
+
+    def _pair_energy(self, s_ncc):
+        st = self.state
+        _, _, first_n, side_p, side_s, perm = st.pair_rows(self.atoms)
+        mid = st.mat_id_n[perm]
+        e = np.empty(len(perm))
+        K.pair_energy(st.sig_p2, st.tau_p2c, st.q0_p2, st.S_p, st.linked_p, np.ascontiguousarray(st.P_n[perm]),
+                      first_n, side_p, side_s, self.trial_omega(perm), st.G_m[mid], st.K_m[mid], e)
+        return float(e.sum())
+
+    def trial_omega(self, perm):
+        return np.ascontiguousarray(self.state.omega_n[perm])
+
+    def _log_volume(self):
+        """``ln sqrt(det B)`` of every automaton (rows of the Atoms) on the present pair table."""
+        st = self.state
+        atoms = self.atoms
+        i_p, j_p, first_n, side_p, side_s, perm = st.pair_rows(atoms)
+        d = atoms.positions[j_p] - atoms.positions[i_p]
+        from ..neighbors import minimum_image
+        minimum_image(d, st.box_c, st.periodic_c)
+        lnJ = np.empty(len(atoms))
+        K.log_volume(np.ascontiguousarray(d), st.q0_p2, st.S_p, st.linked_p, first_n, side_p, side_s, lnJ)
+        return lnJ
+
+    def ledger(self, external_work=None):
+        """The energy ledger (eV): where the work done on the body went.
+
+        ``kinetic + rotational + elastic + plastic + damping + switching + splitting + wall``
+        against the work of the drives (pistons' ``work``) and the initial
+        energy; ``residual`` = initial + work in - the sum (the integration
+        error and the difference between the work of the pair forces and the
+        pairs' elastic energy; see docs/mca.md).  ``elastic`` is the energy
+        stored in the linked pairs (:meth:`elastic_energy`);
+        ``wall`` a wall's stored and sticking-dissipated energy.
+        """
+        kt, kr = self.kinetic_energy()
+        el = self.elastic_energy()
+        wall = 0.0
+        work = 0.0
+        for c in self.atoms.constraints:
+            if hasattr(c, "work"):
+                work += float(c.work)
+            if getattr(c, "kind", "") == "Wall":
+                wall += float(c.energy) + float(c.dissipated)
+        if external_work is not None:
+            work = float(external_work)
+        out = {"kinetic": kt, "rotational": kr, "elastic": el, "plastic": self.plastic_work,
+               "damping": self.dissipated, "switching": self.switch_energy, "splitting": self.split_work,
+               "volume": self.volume_energy, "wall": wall, "work_in": work, "initial": self._E_initial}
+        out["residual"] = (out["initial"] + work
+                           - (kt + kr + el + self.plastic_work + self.dissipated + self.switch_energy
+                              + self.split_work + self.volume_energy + wall))
+        return out
 
     def _check(self, out):
         st = self.state
@@ -461,6 +645,15 @@ class MCADynamics(MolecularDynamics):
         d = self.state.get_state()
         d["stored_work"] = float(self.stored_work)
         d["dissipated"] = float(self.dissipated)
+        d["plastic_work"] = float(self.plastic_work)
+        d["switch_energy"] = float(self.switch_energy)
+        d["split_work"] = float(self.split_work)
+        d["volume_energy"] = float(self.volume_energy)
+        d["volume_syncs"] = int(self.volume_syncs)
+        d["remesh_count"] = int(self.remesh_count)
+        d["E_initial"] = float(self._E_initial)
+        d["remesh"] = np.array([-1.0 if self.remesh_strain is None else self.remesh_strain,
+                                float(self.remesh_every), self.h_link])
         d["nsteps"] = int(self.nsteps)
         if self._S_mean is not None:
             d["contact_S_mean"] = self._S_mean.copy()
@@ -497,6 +690,18 @@ class MCADynamics(MolecularDynamics):
     def _restore_counters(self, d):
         self.stored_work = float(d.get("stored_work", 0.0))
         self.dissipated = float(d.get("dissipated", 0.0))
+        self.plastic_work = float(d.get("plastic_work", 0.0))
+        self.switch_energy = float(d.get("switch_energy", 0.0))
+        self.split_work = float(d.get("split_work", 0.0))
+        self.volume_energy = float(d.get("volume_energy", 0.0))
+        self.volume_syncs = int(d.get("volume_syncs", 0))
+        self.remesh_count = int(d.get("remesh_count", 0))
+        self._E_initial = float(d.get("E_initial", self._E_initial))
+        if "remesh" in d:
+            rs, re, hl = (float(x) for x in np.asarray(d["remesh"]))
+            self.remesh_strain = None if rs < 0 else rs
+            self.remesh_every = int(re)
+            self.h_link = hl
         self.nsteps = int(d.get("nsteps", self.state.step))
         if "contact_S_mean" in d:
             self._S_mean = np.array(d["contact_S_mean"], dtype=float)

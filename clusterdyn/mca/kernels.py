@@ -388,3 +388,69 @@ def incidence(n, i_p, j_p):
         side_s[fill[b]] = 1
         fill[b] += 1
     return cnt, side_p, side_s
+
+
+@njit(cache=True)
+def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, side_s, omega_n,
+                G_n, K_n, e_n):
+    """Elastic energy of every automaton from its pair state (eV), the energy whose
+    derivative the pair forces are (docs/mca.md, "Energy ledger"):
+
+    ``e_i = sum_j q_ij S_ij [(sigma_ij - (lambda/K) P_i)^2 + |tau_ij|^2] / (4 G_i)
+    + lambda P_i^2 Omega_i / (2 K_i^2)``, ``P_i`` the automaton's mean stress
+    (from its volume change, accumulated by the dynamics), lambda = K - 2G/3: with ``sigma_ij = 2G eps_ij + (lambda/K) P_i``
+    this is ``sum_j G q S eps^2 + lambda dOmega^2/(2 Omega)`` plus the tangential
+    springs.  Linked pairs only (contacts carry no stored energy here).
+    """
+    for i in range(first_n.shape[0] - 1):
+        P = P_n[i]
+        G = G_n[i]
+        K = K_n[i]
+        lam = K - 2.0 * G / 3.0
+        c = lam / K
+        e = 0.0
+        for k in range(first_n[i], first_n[i + 1]):
+            p = side_p[k]
+            if linked_p[p] == 0:
+                continue
+            s = side_s[k]
+            v = sig_p2[p, s] - c * P
+            t2 = tau_p2c[p, s, 0] ** 2 + tau_p2c[p, s, 1] ** 2 + tau_p2c[p, s, 2] ** 2
+            e += q0_p2[p, s] * S_p[p] * (v * v + t2)
+        e_n[i] = e / (4.0 * G) + lam * P * P * omega_n[i] / (2.0 * K * K)
+
+
+@njit(cache=True)
+def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
+    """``ln sqrt(det B_i)``, ``B_i = sum_j q_ij S_ij d_ij (x) d_ij`` over the linked pairs of every
+    automaton (large strain, docs/mca.md): under any affine motion of the neighbourhood,
+    ``B -> F B F^T``, so the change of this number is exactly ``ln det F`` (an isochoric flow
+    changes it by nothing at any strain, where the summed pair elongations change by O(strain^2)).
+    NaN where the neighbourhood is flat (det B below 1e-9 of (tr B / 3)^3)."""
+    for i in range(first_n.shape[0] - 1):
+        b00 = 0.0
+        b01 = 0.0
+        b02 = 0.0
+        b11 = 0.0
+        b12 = 0.0
+        b22 = 0.0
+        for k in range(first_n[i], first_n[i + 1]):
+            p = side_p[k]
+            if linked_p[p] == 0:
+                continue
+            w = q0_p2[p, side_s[k]] * S_p[p]
+            x = d_pc[p, 0]
+            y = d_pc[p, 1]
+            z = d_pc[p, 2]
+            b00 += w * x * x
+            b01 += w * x * y
+            b02 += w * x * z
+            b11 += w * y * y
+            b12 += w * y * z
+            b22 += w * z * z
+        det = (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+               + b02 * (b01 * b12 - b11 * b02))
+        tr = (b00 + b11 + b22) / 3.0
+        # a flat neighbourhood (all pairs in a plane, or none) has no volume: NaN (no sync)
+        lnJ_n[i] = 0.5 * math.log(det) if det > 1e-9 * tr * tr * tr and tr > 0.0 else math.nan
+

@@ -27,13 +27,13 @@ from ..neighbors import minimum_image
 from ..build.tessellation import tessellate
 from .kernels import incidence
 from ..materials.mca import check_mca_material
-from .response.plastic import hardening_table
+from .response.plastic import hardening_table, rate_constants
 
 #: per-pair arrays that are history (checkpointed); the rest are set-up constants (also checkpointed)
 PAIR_ARRAYS = ("pid_p2", "linked_p", "S_p", "q0_p2", "r0_p", "sig_p2", "tau_p2c", "dlast_pc", "D_p",
                "count_p", "sigc_p", "beta_p", "mu_p", "sigw_p", "nweld_p", "sigd_p", "Dc_p",
                "epsd_p", "epsf_p")
-ATOM_ARRAYS = ("id_n", "thlast_nc", "epsp_n", "omega_n")
+ATOM_ARRAYS = ("id_n", "thlast_nc", "epsp_n", "omega_n", "P_n")
 
 
 def mca_materials_of(atoms, materials=None):
@@ -95,7 +95,11 @@ class MCAState:
         if len(np.unique(ids)) != len(ids):
             raise InputError("id", "duplicates", "unique particle ids")
         pos = atoms.get_positions()
-        geom = tessellate(pos, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, self.dim)
+        if atoms.info.get("mca_closure") == "body" and not np.any(atoms.pbc):
+            from ..build.tessellation import tessellate_body     # carved shapes (build.mca)
+            geom = tessellate_body(pos, atoms.arrays["radius"], self.dim)
+        else:
+            geom = tessellate(pos, atoms.arrays["radius"], atoms.cell.array, atoms.pbc, self.dim)
         self.box_c, self.periodic_c = _box(atoms)
         i, j = geom["i_p"], geom["j_p"]
         npair = len(i)
@@ -121,6 +125,7 @@ class MCAState:
         self.omega_faces_n = geom["omega_n"].copy()
         self.thlast_nc = np.array(atoms.arrays.get("theta", np.zeros((len(atoms), 3))), float)
         self.epsp_n = np.zeros(len(atoms))
+        self.P_n = np.zeros(len(atoms))       # mean stress from the volume change (energy ledger)
         rows = self.rows(ids)
         ii, jj = rows[self.pid_p2[:, 0]], rows[self.pid_p2[:, 1]]
         d = pos[jj] - pos[ii]
@@ -132,6 +137,10 @@ class MCAState:
         for c in cracks:
             self.unlink_across(pos, ii, jj, **c)
         self._inc_key = None
+        self.lnJ_n = None
+
+    lnJ_n = None      #: large strain: ln sqrt(det B) of every automaton at the last switch (None: none yet)
+    Pref_n = None     #: large strain: P_n at the last switch
 
     # ------------------------------------------------------------------ set-up
     @classmethod
@@ -162,6 +171,10 @@ class MCAState:
         self.plastic_m = np.array([r in ("elastic-plastic", "plastic-degrading") for r in resp], np.int8)
         tabs = [hardening_table(m) if p else (np.array([0.0, 1.0]), np.array([np.inf, np.inf]))
                 for m, p in zip(mats, self.plastic_m)]
+        rc = [rate_constants(m) if p else (0, 0.0, 1.0) for m, p in zip(mats, self.plastic_m)]
+        self.implicit_m = np.array([r[0] for r in rc], np.int8)
+        self.rateC_m = np.array([r[1] for r in rc])
+        self.rate0_m = np.array([r[2] for r in rc])
         k = max(len(t[0]) for t in tabs)
         self.tab_e = np.zeros((len(mats), k))
         self.tab_s = np.zeros((len(mats), k))
@@ -355,20 +368,157 @@ class MCAState:
         self.version += 1
         return int((~keep).sum())
 
+    # ------------------------------------------------------------------ large strain
+    def retessellate(self, atoms, s_ncc, h_link=0.5):
+        """Switch partners and follow the deformation (docs/theory.md 2.7; docs/mca.md).
+
+        The Voronoi tessellation of the current centres (:func:`tessellate_body`,
+        the body closed by ghosts) gives the new pairs, contact areas S,
+        distances q0 = r/2, and the automaton volumes (their current cells).
+
+        * A pair of the new tessellation is **linked** if it was linked before,
+          or if it is new and its overlap ``h = r - (r_i + r_j)`` is below
+          ``h_link (r_i + r_j)``; a pair unlinked before (fracture) stays
+          unlinked.  New faces beyond the overlap rule (long faces at the
+          free surface) are not pairs.
+        * A linked pair that no longer shares a face leaves the table (it
+          *unlinks by switching*: another automaton has come between).
+          Unlinked pairs of the old table still touching (``r < r0``) are kept
+          as contacts with their state.
+        * Every linked pair's state starts from its automata's stress tensors:
+          ``sigma_ij = n.sigma_i.n``, ``tau_ij = sigma_i.n - sigma_ij n`` (and
+          the same with ``sigma_j`` on j's side), so a homogeneous stress field
+          is carried exactly (``sum_j q S n n = Omega I`` on the new cells);
+          damage and healing counters persist on surviving pairs, new pairs
+          start undamaged; plastic strain is per automaton and carries over.
+        * Rest distances are reset to the current ones (``r0 = r``); the
+          objective increments restart from the current separation and
+          rotation.
+
+        Mass and momentum are untouched (positions and velocities are not
+        changed).  ``s_ncc`` are the automata's tensors (rows of ``atoms``).
+        Returns a dict of counts (pairs before, after, new, switched away).
+        """
+        from ..build.tessellation import tessellate_body
+        if np.any(self.periodic_c):
+            raise InputError("remesh", "a periodic sample", "a body without periodic axes "
+                             "(the large-strain re-tessellation closes the body by ghosts)")
+        ids = np.asarray(atoms.arrays["id"], np.int64)
+        rad = np.asarray(atoms.arrays["radius"], float)
+        pos = atoms.get_positions()
+        i_old, j_old = self.pair_rows(atoms)[:2]
+        geom = tessellate_body(pos, rad, self.dim)
+        ii, jj = geom["i_p"], geom["j_p"]
+        a, b = ids[ii], ids[jj]
+        swap = a > b
+        pid = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
+        M = int(ids.max()) + 1
+        key_old = self.pid_p2[:, 0] * M + self.pid_p2[:, 1]
+        key_new = pid[:, 0] * M + pid[:, 1]
+        pos_old = {int(k): q for q, k in enumerate(key_old)}
+        old_row = np.array([pos_old.get(int(k), -1) for k in key_new], np.int64)
+        have = old_row >= 0
+        r = geom["r_p"]
+        rsum = rad[ii] + rad[jj]
+        was_linked = np.zeros(len(ii), bool)
+        was_linked[have] = self.linked_p[old_row[have]] == 1
+        link_new = (~have) & (r - rsum < h_link * rsum)
+        keep_v = was_linked | link_new | (have & ~was_linked)
+        # old unlinked contacts that are not faces any more but still touch
+        old_unl = np.nonzero(self.linked_p == 0)[0]
+        in_new = np.isin(key_old[old_unl], key_new[keep_v])
+        d_old = pos[j_old[old_unl]] - pos[i_old[old_unl]]
+        touch = np.linalg.norm(d_old, axis=1) < self.r0_p[old_unl]
+        extra = old_unl[~in_new & touch]
+        n_before = self.npairs
+        switched = int(np.sum((self.linked_p == 1) & ~np.isin(key_old, key_new[keep_v])))
+        # the new table: Voronoi pairs kept, then the extra contacts (rows of the old table)
+        sel = np.nonzero(keep_v)[0]
+        rows_i = np.concatenate([np.where(swap[sel], jj[sel], ii[sel]), i_old[extra]])
+        rows_j = np.concatenate([np.where(swap[sel], ii[sel], jj[sel]), j_old[extra]])
+        src = np.concatenate([old_row[sel], extra])            # old row or -1
+        old = {k: getattr(self, k) for k in PAIR_ARRAYS}
+        # per-pair material parameters for every pair, then the survivors' own values
+        self._material_setup(atoms, rows_i, rows_j)
+        self.mat_id_n = np.asarray(atoms.arrays["material"], np.int64)[self.rows(ids)[self.id_n]]
+        per_pair = ("sigc_p", "beta_p", "mu_p", "sigw_p", "nweld_p", "sigd_p", "Dc_p", "epsd_p", "epsf_p")
+        fresh = {k: getattr(self, k) for k in per_pair}
+        P = len(src)
+        surv = src >= 0
+        d = pos[rows_j] - pos[rows_i]
+        rr = np.linalg.norm(d, axis=1)
+        nrm = d / rr[:, None]
+        self.pid_p2 = np.ascontiguousarray(np.stack([ids[rows_i], ids[rows_j]], axis=1))
+        nv = len(sel)
+        self.S_p = np.concatenate([geom["S_p"][sel], old["S_p"][extra]])
+        self.q0_p2 = np.ascontiguousarray(np.concatenate([np.stack([0.5 * rr[:nv], 0.5 * rr[:nv]], axis=1),
+                                                          old["q0_p2"][extra]]))
+        linked = np.zeros(P, np.int8)
+        linked[:nv] = (was_linked | link_new)[sel]
+        self.linked_p = linked
+        self.r0_p = np.where(linked == 1, rr, np.concatenate([rr[:nv], old["r0_p"][extra]]))
+        self.dlast_pc = np.ascontiguousarray(d)
+        sig = np.zeros((P, 2))
+        tau = np.zeros((P, 2, 3))
+        for side, rows in ((0, rows_i), (1, rows_j)):
+            t = np.einsum("pab,pb->pa", s_ncc[rows], nrm)
+            sn = np.einsum("pa,pa->p", t, nrm)
+            sig[:, side] = sn
+            tau[:, side] = t - sn[:, None] * nrm
+        unl = linked == 0                      # contacts: the contact law sets them afresh
+        sig[unl & surv] = old["sig_p2"][src[unl & surv]]
+        tau[unl & surv] = old["tau_p2c"][src[unl & surv]]
+        sig[unl & ~surv] = 0.0
+        tau[unl & ~surv] = 0.0
+        self.sig_p2 = np.ascontiguousarray(sig)
+        self.tau_p2c = np.ascontiguousarray(tau)
+        self.D_p = np.where(surv, old["D_p"][np.maximum(src, 0)], 0.0)
+        self.count_p = np.where(surv, old["count_p"][np.maximum(src, 0)], 0).astype(np.int64)
+        for k in per_pair:
+            v = fresh[k].copy()
+            v[surv] = old[k][src[surv]]
+            setattr(self, k, np.ascontiguousarray(v))
+        # the table sorted by ids, as at set-up
+        order = np.lexsort((self.pid_p2[:, 1], self.pid_p2[:, 0]))
+        for k in PAIR_ARRAYS:
+            setattr(self, k, np.ascontiguousarray(getattr(self, k)[order]))
+        perm = self.rows(self.id_n)[ids]       # state row of each atoms row
+        self.omega_n[perm] = geom["vcell_n"]
+        # interior automata (no face with a ghost): their mean cell volume is the body's density
+        inner = np.abs(geom["vcell_n"] - geom["omega_n"]) <= 1e-9 * geom["vcell_n"]
+        self.interior_volume = (float(geom["vcell_n"][inner].mean()) if inner.any() else float("nan"),
+                                int(inner.sum()))
+        self.thlast_nc[perm] = atoms.arrays.get("theta", np.zeros((len(atoms), 3)))
+        self.P_n[perm] = np.trace(s_ncc, axis1=1, axis2=2) / 3.0
+        self._flags()
+        self.version_pairs += 1
+        self.version += 1
+        self._inc_key = None
+        return {"pairs_before": n_before, "pairs_after": self.npairs,
+                "new_links": int(link_new[sel].sum()), "switched": switched}
+
     # ------------------------------------------------------------------ checkpoint
     def get_state(self):
         d = {k: getattr(self, k).copy() for k in PAIR_ARRAYS + ATOM_ARRAYS}
         d["step"] = int(self.step)
         d["time"] = float(self.time)
         d["version"] = int(self.version)
+        if self.lnJ_n is not None:
+            d["lnJ_n"] = self.lnJ_n.copy()
+            d["Pref_n"] = self.Pref_n.copy()
         return d
 
     def set_state(self, d):
         for k in PAIR_ARRAYS + ATOM_ARRAYS:
+            if k == "P_n" and k not in d:          # checkpoints written before the ledger
+                self.P_n = np.zeros(len(d["id_n"]))
+                continue
             setattr(self, k, np.ascontiguousarray(np.array(d[k])))
         self.step = int(d["step"])
         self.time = float(d["time"])
         self.version = int(d.get("version", self.version)) + 1
+        self.lnJ_n = None if d.get("lnJ_n") is None else np.array(d["lnJ_n"], dtype=float)
+        self.Pref_n = None if d.get("Pref_n") is None else np.array(d["Pref_n"], dtype=float)
         self.version_pairs += 1
         self._inc_key = None
 

@@ -233,6 +233,10 @@ class Wall(Drive):
         if self._K_t is not None:
             return self._K_t, self._dc_t
         K, dc = self.stiffness, self.cutoff
+        if (K is None or dc is None) and hasattr(atoms.calc, "wall_defaults"):
+            K_d, dc_d = atoms.calc.wall_defaults(atoms)      # e.g. MCA: from modulus and size
+            K = np.asarray(K_d, float) if K is None else K
+            dc = np.asarray(dc_d, float) if dc is None else dc
         if K is None or dc is None:
             calc = atoms.calc
             if hasattr(calc, "setup") and hasattr(calc, "potentials"):

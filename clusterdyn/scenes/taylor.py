@@ -140,7 +140,18 @@ PARAMS = [
           kind="int", low=0),
     Param("axis", "z", "the rod's axis; it flies along -axis onto the wall", kind="choice",
           choices=("x", "y", "z")),
+    Param("method", "cd", "cd: the CD polycrystal (the paper's model); mca: Movable Cellular Automata with "
+          "J2 / Johnson-Cook flow and large-strain switching (fcc automata of size r0, default D0/8)",
+          kind="choice", choices=("cd", "mca")),
+    Param("mca_material", "Al6061-T6", "MCA material (method=mca)", kind="choice",
+          choices=("Al6061-T6", "Al6061", "copper")),
+    Param("mca_damping", 0.05, "MCA pair damping, fraction of critical (method=mca)", low=0.0),
+    Param("remesh_strain", 0.1, "MCA: pair strain that triggers a re-tessellation (method=mca)", low=0.0,
+          high=0.5, low_open=True),
 ]
+
+#: MCA default resolution: automaton size D0 / MCA_ACROSS
+MCA_ACROSS = 8
 
 
 # --------------------------------------------------------------------------- set-up
@@ -170,7 +181,80 @@ def taylor_packing(v, r0):
 
 
 def taylor_r0(v):
-    return v["r0"] if v["r0"] is not None else v["D0"] / DEFAULT_ACROSS
+    if v["r0"] is not None:
+        return v["r0"]
+    return v["D0"] / (MCA_ACROSS if v.get("method") == "mca" else DEFAULT_ACROSS)
+
+
+def build_taylor_mca(v):
+    """The MCA rod (fcc automata of size r0 in the cylinder), its wall and dynamics (method=mca).
+
+    Johnson-Cook 6061-T6 by default (``mca_material``); the wall's stiffness and reach are the
+    MCA defaults (:meth:`clusterdyn.mca.MCA.wall_defaults`); the dynamics switches partners
+    (``remesh_strain``) and damps pair velocities at ``mca_damping``.  Nothing is relaxed: an
+    MCA packing is at rest in its set-up state.
+    """
+    from ..build.mca import mca_packing
+    from ..build.shapes import Cylinder
+    from ..mca import MCA, MCADynamics
+    from ..mca.dynamics import COURANT, default_timestep, wave_speeds
+    mat = get_material(v["mca_material"])
+    D0, L0, V = v["D0"], v["L0"], v["V"]
+    d = taylor_r0(v)
+    ax = parse_axis(v["axis"])
+    center = np.full(3, 0.5 * D0 + d)
+    center[ax] = 0.0
+    atoms = mca_packing(mat, d, Cylinder(center=tuple(center), radius=0.5 * D0, length=L0, axis=ax), "fcc")
+    atoms.calc = MCA()
+    z = atoms.positions[:, ax]
+    L_init = float(np.ptp(z) + d)
+    out = axial_outline(atoms.positions, ax, d, q=OUTLINE_Q)
+    inner = np.isfinite(out["r"])
+    inner[:2] = inner[-2:] = False
+    if inner.sum() < 2:
+        inner = np.isfinite(out["r"])
+    offset = 0.5 * D0 - float(np.median(out["r"][inner]))
+    noise_outline = float(np.max(np.abs(out["r"][inner] + offset - 0.5 * D0)) / (0.5 * D0))
+    vel = np.zeros(3)
+    vel[ax] = -V
+    atoms.set_velocities(np.broadcast_to(vel, (len(atoms), 3)).copy())
+    normal = np.zeros(3)
+    normal[ax] = 1.0
+    point = np.zeros(3)
+    point[ax] = z.min() - 0.5 * d - 0.01 * d        # d_c = d/2: the end automata just touch
+    wall = Wall(point, normal, sticking=v["wall"] == "sticking")
+    atoms.set_constraint(wall)
+    cl = wave_speeds(mat)[0]
+    dt = default_timestep(atoms) * (v["dt_factor"] / TIMESTEP_FACTOR) * cl / (cl + V)
+    dyn = MCADynamics(atoms, timestep=dt, damping=v["mca_damping"], remesh_strain=v["remesh_strain"])
+    rho = float(atoms.get_masses().sum() / (math.pi * 0.25 * D0 ** 2 * L0))
+    t_max = v["t_max"]
+    if t_max is None:
+        t_max = 2.0 * rho * V * L0 / T_MAX_YIELD + 20.0 * L0 / cl
+    announce_cost("taylor", len(atoms), int(math.ceil(t_max / dt)))
+    info = {"method": "mca", "r0": d, "L0": L0, "D0": D0, "V": V, "axis": ax, "dt": dt,
+            "nsteps": int(math.ceil(t_max / dt)), "t_max": t_max, "wall_z": float(point[ax]), "L_init": L_init,
+            "offset": offset, "outline_noise": noise_outline, "rho": rho, "rho0": float(mat.rho0), "c0": cl,
+            "courant": COURANT * float(v["dt_factor"] / TIMESTEP_FACTOR), "material": mat.name,
+            "notes": [], "n_automata": len(atoms)}
+    return atoms, dyn, info
+
+
+def mca_ledger(dyn):
+    """The MCA energy ledger (:meth:`MCADynamics.ledger`) in joules, with the keys of :func:`ledger`."""
+    led = dyn.ledger()
+    J = units.J
+    out = {"kinetic0": float(led["initial"]) / J, "potential0": 0.0,
+           "kinetic": float(led["kinetic"] + led["rotational"]) / J, "potential": float(led["elastic"]) / J,
+           "damping_loss": float(led["damping"]) / J, "wall_dissipated": 0.0, "drive_work": 0.0,
+           "wall_work": 0.0, "removed": 0.0, "removed_count": 0, "residual": float(led["residual"]) / J}
+    walls = [c for c in dyn.atoms.constraints if isinstance(c, Wall)]
+    out["wall_dissipated"] = float(sum(w.dissipated for w in walls)) / J
+    out["potential"] += float(sum(w.energy for w in walls)) / J
+    for k in ("plastic", "switching", "splitting", "volume"):
+        out[k] = float(led[k]) / J
+    out["switches"] = int(dyn.remesh_count)
+    return out
 
 
 def build_taylor(v):
@@ -266,7 +350,8 @@ class TaylorRecord:
         self.t.append(d.get_time())
         self.L.append(float(np.ptp(z) + self.r0))
         self.vz.append(float(p.sum() / self.m.sum()))
-        self.ek.append(float(d.get_kinetic_energy()))
+        self.ek.append(float(d.get_kinetic_energy() if hasattr(d, "get_kinetic_energy")
+                             else self.atoms.get_kinetic_energy()))
         self.contact.append(bool(z.min() - self.wall_z < self.reach))
 
     def stop(self, d):
@@ -331,6 +416,13 @@ class TaylorScene(SceneDef):
 
     def check(self, v):
         r0 = taylor_r0(v)
+        if v["method"] == "mca":
+            if v["D0"] < 4.0 * r0:
+                raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v['D0'] / 4 / units.mm:g} mm "
+                                 "(a rod a few automata across)")
+            if v["L0"] < 4.0 * r0:
+                raise InputError("L0", f"{v['L0'] / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
+            return
         if v["D0"] < 4.0 * r0:
             raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v['D0'] / 4 / units.mm:g} mm "
                              "(a rod a few clusters across)")
@@ -345,7 +437,7 @@ class TaylorScene(SceneDef):
                              f"{min(v['D0'], v['L0']) / units.mm:g} mm")
 
     def setup(self, v, stage):
-        return build_taylor(v)
+        return build_taylor_mca(v) if v["method"] == "mca" else build_taylor(v)
 
     def attach(self, v, stage, atoms, dyn, info):
         rec = TaylorRecord(atoms, dyn, info)
@@ -359,12 +451,13 @@ class TaylorScene(SceneDef):
     def finish(self, v, stage):
         atoms, dyn, rec = stage.atoms, stage.dyn, stage.analysis
         info = stage.info
-        fr = fragments(atoms)
+        mca = info.get("method") == "mca"
+        fr = fragments(atoms, pairs=dyn.state) if mca else fragments(atoms)
         main = fr.labels == fr.largest
         wall = [c for c in atoms.constraints if isinstance(c, Wall)][0]
         return {"info": info, "positions": atoms.get_positions(), "main": main,
                 "n_broken": int(len(atoms) - main.sum()), "n_fragments": int(fr.n_fragments),
-                "history": rec.get_state(), "reason": rec.reason, "ledger": ledger(dyn),
+                "history": rec.get_state(), "reason": rec.reason, "ledger": mca_ledger(dyn) if mca else ledger(dyn),
                 "impulse_N_s": (np.asarray(wall.impulse) / (units.N * units.s)).tolist(),
                 "steps": int(dyn.nsteps), "t_run": stage.t_run, "n": len(atoms),
                 "v_end": float(rec.vz[-1]) if rec.vz else 0.0}
@@ -407,19 +500,36 @@ class TaylorScene(SceneDef):
                                   "at the end (negative: rebound)")
         lq, lnote = ledger_quantities(sm["ledger"])
         q.update(lq)
-        body = info["body"]
         notes = []
         notes += list(info["notes"])
+        mca = info.get("method") == "mca"
+        if mca:
+            led = sm["ledger"]
+            for k, txt in (("plastic", "plastic work of the radial returns"),
+                           ("switching", "elastic energy released by the switches (re-tessellations)"),
+                           ("splitting", "O(dt) work difference of the response corrections"),
+                           ("volume", "elastic energy change of the exact-volume syncs")):
+                q[f"E_{k}"] = Quantity(led[k], "J", note=txt)
+            q["residual_over_plastic"] = Quantity(led["residual"] / max(abs(led["plastic"]), 1e-300), "",
+                                                  note="energy ledger residual / plastic work")
         notes.append(sm["reason"] or f"NOT stopped by t_max = {info['t_max'] / units.us:.4g} us (criterion: "
                      f"velocity below {100 * STOP_SPEED:g}% of V or reversed and length within "
                      f"{100 * STOP_LENGTH:g}% over {STOP_WINDOW / units.us:g} us)")
-        notes.append(f"rod: {sm['n']} clusters, r0 = {info['r0'] / units.mm:.4g} mm = D0/{D0 / info['r0']:.3g}, "
+        if mca:
+            notes.append(f"MCA rod: {sm['n']} automata of {info['r0'] / units.mm:.4g} mm = D0/{D0 / info['r0']:.3g} "
+                         f"(fcc), {info['material']}, pair damping {v['mca_damping']:g}, switching at pair strain "
+                         f"{v['remesh_strain']:g} ({sm['ledger']['switches']} switches), wall {v['wall']} "
+                         f"(MCA default stiffness); the CD packing parameters do not apply")
+        else:
+            body = info["body"]
+            notes.append(f"rod: {sm['n']} clusters, r0 = {info['r0'] / units.mm:.4g} mm = D0/{D0 / info['r0']:.3g}, "
                      f"{body['n_grains']} grains of {info['grain_size'] / units.mm:.3g} mm = "
                      f"{info['grain_size'] / info['r0']:.3g} r0, porosity {100 * body['porosity']:.1f}% "
                      f"(d_min {body['d_min_r0']:.3f} r0), rc {info['rc']:g}, {info.get('boundaries', 'bonded')} grain "
                      f"boundaries, masses '{body['mass_choice']}' "
                      f"(density {info['rho'] / units.g_cm3:.3f} g/cm3), wall {v['wall']}, J {v['J']}")
-        notes.append(f"relaxed at rest ({info['relax_steps']} steps): length {info['L_init'] / units.mm:.4g} mm "
+        if not mca:
+            notes.append(f"relaxed at rest ({info['relax_steps']} steps): length {info['L_init'] / units.mm:.4g} mm "
                      f"(nominal {L0 / units.mm:g}); outline offset {info['offset'] / info['r0']:+.3f} r0, outline "
                      f"noise on the undeformed rod {100 * info['outline_noise']:.2f}% of D0/2")
         notes.append(f"{sm['steps']} steps of {info['dt'] / units.ns:.4g} ns, {sm['t_run']:.1f} s stepping; "
@@ -461,7 +571,8 @@ def write_outline(out, m, info, outline, test):
     fig, ax = plt.subplots(figsize=(5.0, 6.5))
     z, r = m["z"] / mm, m["r"] / mm
     ok = np.isfinite(r)
-    ax.plot(r[ok], z[ok], "b-", label="CD")
+    label = str(info.get("method", "cd")).upper()
+    ax.plot(r[ok], z[ok], "b-", label=label)
     ax.plot(-r[ok], z[ok], "b-")
     L0, D0 = info["L0"] / mm, info["D0"] / mm
     ax.plot([-D0 / 2, -D0 / 2, D0 / 2, D0 / 2], [0, L0, L0, 0], "k:", lw=0.8, label="initial rod")
@@ -485,7 +596,7 @@ def write_outline(out, m, info, outline, test):
         w = csv.writer(fh)
         w.writerow(["source", "z_mm", "r_mm"])
         for a, b in zip(z[ok], r[ok]):
-            w.writerow(["CD", f"{a:.5g}", f"{b:.5g}"])
+            w.writerow([label, f"{a:.5g}", f"{b:.5g}"])
         if outline is not None:
             for a, b in zip(outline[0] / mm, outline[1] / mm):
                 w.writerow(["experiment", f"{a:.5g}", f"{b:.5g}"])

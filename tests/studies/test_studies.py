@@ -17,7 +17,7 @@ NO_REFINE = {"refine_length": "0"}   # tiny samples: no automatic rerun on a lon
 
 def test_registry_and_lists():
     assert set(study_names()) == {"hugoniot", "convergence", "stability", "mca-elasticity", "mca-degrading",
-                                  "flow-stress", "dusting", "calibrate"}
+                                  "flow-stress", "dusting", "calibrate", "mca-compression-flow", "mca-taylor"}
     with pytest.raises(InputError, match="study="):
         get_study("nosuch")
     p = ListParam("u", (1.0,), "speeds", unit="km/s", low=0.0, low_open=True)

@@ -7,6 +7,24 @@ deviatoric parts of its pair forces are scaled,
 with H the hardening slope.  The hardening curve is a table
 ``(eps_p_k, sigma_y_k)`` per material (a function is tabulated at set-up),
 interpolated linearly and held constant beyond its last point.
+
+Metals (docs/theory.md 2.7): a material with ``extra['johnson_cook']``
+(:func:`johnson_cook`) flows by J2 with the Johnson-Cook curve
+``sigma_y = (A + B eps_p^n)(1 + C ln(rate/eps0))`` (rate factor 1 below
+eps0; thermal term not modelled) and an *implicit* (consistent) radial
+return: the plastic strain increment ``x`` of the step solves
+``sigma_int - 3G x = sigma_y(eps_p + x, x/dt)`` (bisection to round-off;
+the left side falls and the right side rises with x, so the root is unique),
+and the deviator is scaled to ``M = (sigma_int - 3G x)/sigma_int``.  The
+strain hardening is tabulated on a geometric grid (400 points from 1e-6 to
+20, error of the linear interpolation below 1e-4 of sigma_y past eps_p =
+1e-4); the rate factor is evaluated exactly.
+
+Every return also yields the plastic work of the step, the drop of the
+automaton's elastic energy in its pairs (:func:`clusterdyn.mca.kernels.pair_energy`,
+with the mean stress ``Pv_n`` of the volume change and ``c_n = lambda/K``;
+for a homogeneous field ``Omega (sigma_int^2 - sigma_new^2)/(6G)`` = ``Omega x
+(sigma_int + sigma_new)/2``), summed by the dynamics into its energy ledger.
 """
 
 import math
@@ -32,16 +50,28 @@ def yield_stress(eps_p, tab_e, tab_s, m):
 
 
 @njit(cache=True)
+def rate_factor(x, dt, C, eps0):
+    """Johnson-Cook rate factor ``1 + C ln(x/(dt eps0))`` for a plastic strain increment x (1 below eps0)."""
+    if C == 0.0 or x <= eps0 * dt:
+        return 1.0
+    return 1.0 + C * math.log(x / (dt * eps0))
+
+
+@njit(cache=True)
 def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, tab_s, soft_n,
-                  epsp_n, sig_p2, tau_p2c, M_n):
+                  epsp_n, sig_p2, tau_p2c, M_n, implicit_m, rateC_m, rate0_m, dt, omega_n, wp_n,
+                  q0_p2, S_p, Pv_n, c_n):
     """Return every yielding automaton to its yield surface; returns the number that yielded.
 
     ``soft_n`` scales the yield stress (1 - D for plastic-degrading, else 1).
-    ``M_n`` receives the scale factor (1 where elastic).
+    ``M_n`` receives the scale factor (1 where elastic), ``wp_n`` the plastic work of the
+    step (0 where elastic).  Materials with ``implicit_m`` set use the consistent return
+    with the rate factor (``rateC_m``, ``rate0_m`` in 1/ASE time; module docstring).
     """
     n = 0
     for i in range(first_n.shape[0] - 1):
         M_n[i] = 1.0
+        wp_n[i] = 0.0
         m = mat_n[i]
         if plastic_m[m] == 0:
             continue
@@ -56,21 +86,94 @@ def radial_return(s_ncc, first_n, side_p, side_s, mat_n, plastic_m, G_n, tab_e, 
         sy *= soft_n[i]
         if sint <= sy or sint == 0.0:
             continue
-        M = sy / sint
+        G3 = 3.0 * G_n[i]
+        if implicit_m[m]:
+            lo = 0.0
+            hi = sint / G3
+            e0 = epsp_n[i]
+            for _ in range(200):
+                x = 0.5 * (lo + hi)
+                if x == lo or x == hi:
+                    break
+                syx, _h = yield_stress(e0 + x, tab_e, tab_s, m)
+                g = sint - G3 * x - soft_n[i] * syx * rate_factor(x, dt, rateC_m[m], rate0_m[m])
+                if g > 0.0:
+                    lo = x
+                else:
+                    hi = x
+            x = 0.5 * (lo + hi)
+            snew = sint - G3 * x
+            epsp_n[i] = e0 + x
+        else:
+            snew = sy
+            epsp_n[i] += (sint - sy) / (G3 + H)
+        M = snew / sint
         M_n[i] = M
-        epsp_n[i] += (sint - sy) / (3.0 * G_n[i] + H)
+        de = 0.0
+        cP = c_n[i] * Pv_n[i]
         for k in range(first_n[i], first_n[i + 1]):
             p = side_p[k]
             s = side_s[k]
+            v0 = sig_p2[p, s] - cP
+            t0 = tau_p2c[p, s, 0] ** 2 + tau_p2c[p, s, 1] ** 2 + tau_p2c[p, s, 2] ** 2
             sig_p2[p, s] = P + (sig_p2[p, s] - P) * M
+            v1 = sig_p2[p, s] - cP
+            de += q0_p2[p, s] * S_p[p] * (v0 * v0 - v1 * v1 + t0 * (1.0 - M * M))
             for a in range(3):
                 tau_p2c[p, s, a] *= M
+        # the drop of the pairs' elastic energy (kernels.pair_energy, mean stress Pv_n from the
+        # volume): for a homogeneous field Omega (sint^2 - snew^2)/(6G)
+        wp_n[i] = de / (4.0 * G_n[i])
         n += 1
     return n
 
 
+def johnson_cook(A, B, n, C=0.0, eps0=1.0):
+    """The Johnson-Cook record of ``Material.extra['johnson_cook']``.
+
+    A, B : eV/Angstrom^3; n, C dimensionless; eps0 reference strain rate in 1/s.
+    ``sigma_y = (A + B eps_p^n)(1 + C ln(rate/eps0))`` (no thermal term).
+    """
+    from ...errors import InputError
+    for name, v, ok in (("A", A, A > 0), ("B", B, B >= 0), ("n", n, 0 < n <= 1),
+                        ("C", C, C >= 0), ("eps0", eps0, eps0 > 0)):
+        if not ok:
+            raise InputError(f"johnson_cook.{name}", v, {"A": "a positive yield stress",
+                                                         "B": "B >= 0", "n": "0 < n <= 1",
+                                                         "C": "C >= 0", "eps0": "a positive rate (1/s)"}[name])
+    return {"A": float(A), "B": float(B), "n": float(n), "C": float(C), "eps0": float(eps0)}
+
+
+def jc_static(jc, eps_p):
+    """Johnson-Cook strain hardening ``A + B eps_p^n`` (eV/Angstrom^3)."""
+    return jc["A"] + jc["B"] * np.power(np.maximum(eps_p, 0.0), jc["n"])
+
+
+def jc_flow_stress(jc, eps_p, rate_per_s):
+    """Johnson-Cook flow stress at plastic strain eps_p and plastic strain rate (1/s)."""
+    r = np.maximum(np.asarray(rate_per_s, float), jc["eps0"])
+    return jc_static(jc, eps_p) * (1.0 + jc["C"] * np.log(r / jc["eps0"]))
+
+
+def rate_constants(material):
+    """(implicit, C, eps0 in 1/ASE time) of a plastic material."""
+    jc = material.extra.get("johnson_cook")
+    if jc is None:
+        return 0, 0.0, 1.0
+    from ... import units
+    return 1, float(jc["C"]), float(jc["eps0"]) / units.s
+
+
 def hardening_table(material, n=201, eps_max=1.0):
-    """(eps_p, sigma_y) table of a material: from ``hardening`` (callable or (2, K) table) or flat."""
+    """(eps_p, sigma_y) table of a material: from ``hardening`` (callable or (2, K) table) or flat.
+
+    A Johnson-Cook material (``extra['johnson_cook']``) is tabulated on a geometric grid
+    (0, then 400 points from 1e-6 to 20).
+    """
+    jc = material.extra.get("johnson_cook")
+    if jc is not None:
+        e = np.concatenate([[0.0], np.geomspace(1e-6, 20.0, 400)])
+        return e, jc_static(jc, e)
     sy = float(material.sigma_y)
     h = material.hardening
     if h is None:
