@@ -207,14 +207,7 @@ def build_taylor_mca(v):
     atoms = mca_packing(mat, d, Cylinder(center=tuple(center), radius=0.5 * D0, length=L0, axis=ax), "fcc")
     atoms.calc = MCA()
     z = atoms.positions[:, ax]
-    L_init = float(np.ptp(z) + d)
-    out = axial_outline(atoms.positions, ax, d, q=OUTLINE_Q)
-    inner = np.isfinite(out["r"])
-    inner[:2] = inner[-2:] = False
-    if inner.sum() < 2:
-        inner = np.isfinite(out["r"])
-    offset = 0.5 * D0 - float(np.median(out["r"][inner]))
-    noise_outline = float(np.max(np.abs(out["r"][inner] + offset - 0.5 * D0)) / (0.5 * D0))
+    L_init, offset, noise_outline = _rest_outline(atoms, ax, d, D0)
     vel = np.zeros(3)
     vel[ax] = -V
     atoms.set_velocities(np.broadcast_to(vel, (len(atoms), 3)).copy())
@@ -257,6 +250,21 @@ def mca_ledger(dyn):
     return out
 
 
+def _rest_outline(atoms, ax, size, D0):
+    """The rod at rest: its length (end to end plus one particle), the outline's calibration offset
+    (the test's D0/2 less the median measured radius, ends left out) and the largest outline
+    deviation left after it, relative to D0/2."""
+    L_init = float(np.ptp(atoms.positions[:, ax]) + size)
+    out = axial_outline(atoms.positions, ax, size, q=OUTLINE_Q)
+    inner = np.isfinite(out["r"])
+    inner[:2] = inner[-2:] = False
+    if inner.sum() < 2:
+        inner = np.isfinite(out["r"])
+    offset = 0.5 * D0 - float(np.median(out["r"][inner]))
+    noise_outline = float(np.max(np.abs(out["r"][inner] + offset - 0.5 * D0)) / (0.5 * D0))
+    return L_init, offset, noise_outline
+
+
 def build_taylor(v):
     """The relaxed rod, its wall and dynamics; returns ``(atoms, dyn, info)`` (lifecycle set-up)."""
     mat = get_material(v["material"])
@@ -289,14 +297,7 @@ def build_taylor(v):
     pot = calc.potentials[0]
     # the relaxed rod at rest: its length and the outline's calibration offset
     z = atoms.positions[:, ax]
-    L_init = float(np.ptp(z) + r0)
-    out = axial_outline(atoms.positions, ax, r0, q=OUTLINE_Q)
-    inner = np.isfinite(out["r"])
-    inner[:2] = inner[-2:] = False
-    if inner.sum() < 2:
-        inner = np.isfinite(out["r"])
-    offset = 0.5 * D0 - float(np.median(out["r"][inner]))
-    noise_outline = float(np.max(np.abs(out["r"][inner] + offset - 0.5 * D0)) / (0.5 * D0))
+    L_init, offset, noise_outline = _rest_outline(atoms, ax, r0, D0)
     # velocity and wall
     vel = np.zeros(3)
     vel[ax] = -V
