@@ -5,13 +5,12 @@ times: a before/after check that a change leaves every scene's results the same 
     python benchmarks/scene_digest.py compare OUTDIR_A OUTDIR_B    # which scenes differ (exit: how many)
 
 Timing figures (particle-steps/s, "N s stepping", wall times) are left out of the comparison; every
-measured value, reference and parameter is compared to the bit.  The CLI is the ``clusterdyn`` on
-PATH, run with PYTHONPATH=TREE."""
+measured value, reference and parameter is compared to the bit.  The CLI is this Python's
+``python -m clusterdyn.cli`` with PYTHONPATH=TREE."""
 import json
 import os
 import pathlib
 import re
-import shutil
 import subprocess
 import sys
 
@@ -48,10 +47,10 @@ def strip(o):
 def main(tree, outdir):
     out = pathlib.Path(outdir); out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONPATH=tree)
-    exe = shutil.which("clusterdyn") or "clusterdyn"
+    exe = [sys.executable, "-m", "clusterdyn.cli"]
     names = sys.argv[3:] or list(TINY)
     for name in names:
-        args = [exe, "run", name, "--json", "--quiet", "--out", str(out / ("run_" + name))]
+        args = exe + ["run", name, "--json", "--quiet", "--out", str(out / ("run_" + name))]
         for k, v in TINY[name].items():
             args += ["--set", f"{k}={v}"]
         p = subprocess.run(args, env=env, capture_output=True, text=True, cwd=tree)
