@@ -99,8 +99,43 @@ def _threads(args):
         set_max_threads(args.threads)
 
 
+RUN_OPTIONS = (
+    ("--set KEY=VALUE", "a scene parameter, with its unit (u=3km/s, r0=5um); repeat for more"),
+    ("--config FILE.toml", "parameters from a TOML file (top-level 'scene' and a [params] table)"),
+    ("--out DIR", "the folder for result.json, the H5MD file, PNG, CSV and the checkpoint"),
+    ("--json", "print the result as one JSON object on stdout"),
+    ("--quiet", "no table and no progress bar"),
+    ("--restart CHECKPOINT", "continue a run from its checkpoint.h5 (same parameters)"),
+    ("--threads N", "threads of the kernels (default: all)"),
+    ("--engine numba|lammps", "clusterdyn's kernels (default) or LAMMPS (--ranks N, --deck-only)"),
+)
+
+
+def _print_run_help(scene_name):
+    """``clusterdyn run --help`` (the scenes) or ``clusterdyn run SCENE --help`` (its parameters)."""
+    from .scenes import all_scenes, get_scene
+    if scene_name is None:
+        print("usage: clusterdyn run SCENE [--set KEY=VALUE ...] [options]\n\nscenes "
+              "(clusterdyn run SCENE --help gives a scene's parameters):")
+        for name, sc in sorted(all_scenes().items()):
+            print(f"  {name:18s} {sc.description}")
+    else:
+        sc = get_scene(scene_name)
+        print(f"usage: clusterdyn run {scene_name} [--set KEY=VALUE ...] [options]\n\n{sc.description}\n")
+        print("parameters (--set KEY=VALUE; default, unit, meaning, range):")
+        for p in sc.params:
+            print(f"  {p.describe()}")
+    print("\noptions:")
+    for opt, what in RUN_OPTIONS:
+        print(f"  {opt:24s} {what}")
+    return 0
+
+
 def cmd_run(args):
     from .scenes import get_scene
+    if args.help or args.scene is None:
+        code = _print_run_help(args.scene)
+        return code if args.help else EXIT_INPUT
     _threads(args)
     overrides = {}
     scene = get_scene(args.scene)
@@ -160,7 +195,13 @@ def cmd_analyse(args):
 
 
 def cmd_study(args):
-    from .studies import get_study, study_params, study_summary
+    from .studies import get_study, study_names, study_params, study_summary
+    if args.study is None:
+        print("usage: clusterdyn study STUDY [--set KEY=VALUE ...] [--out DIR] [--json] [--quiet]\n\n"
+              "studies (clusterdyn study STUDY --help gives a study's parameters):")
+        for name in study_names():
+            print(f"  {name:22s} {study_summary(name)}")
+        return 0 if args.help else EXIT_INPUT
     if args.help:
         study = get_study(args.study)
         print(f"{args.study}: {study_summary(args.study)}")
@@ -243,8 +284,9 @@ def build_parser():
     p = _Parser(prog="clusterdyn", description="Cluster Dynamics and Movable Cellular Automata")
     p.add_argument("--version", action="version", version=f"clusterdyn {__version__}")
     sub = p.add_subparsers(dest="command", parser_class=_Parser)
-    r = sub.add_parser("run", help="run a scene")
-    r.add_argument("scene")
+    r = sub.add_parser("run", help="run a scene (clusterdyn run --help lists them)", add_help=False)
+    r.add_argument("scene", nargs="?")
+    r.add_argument("--help", "-h", action="store_true", help="the scenes, or a scene's parameters")
     r.add_argument("--set", action="append", metavar="KEY=VALUE")
     r.add_argument("--config", metavar="FILE.toml")
     r.add_argument("--out", metavar="DIR")
@@ -267,8 +309,8 @@ def build_parser():
     an.add_argument("--json", action="store_true")
     an.add_argument("--quiet", action="store_true")
     an.set_defaults(func=cmd_analyse)
-    s = sub.add_parser("study", help="run a study (clusterdyn list names them)", add_help=False)
-    s.add_argument("study")
+    s = sub.add_parser("study", help="run a study (clusterdyn study --help lists them)", add_help=False)
+    s.add_argument("study", nargs="?")
     s.add_argument("--help", "-h", action="store_true", help="the study's parameters")
     s.add_argument("--set", action="append", metavar="KEY=VALUE")
     s.add_argument("--out", metavar="DIR")

@@ -139,3 +139,23 @@ def test_restart_from_cli_gives_identical_result(tmp_path):
     with H5MDReader(str(b / "shock.h5md")) as rd:
         steps = list(rd.steps)
     assert steps == sorted(set(steps))          # appended without duplicate frames
+
+
+def test_help_lists_the_scenes_the_studies_and_a_scenes_parameters(capsys):
+    """`run --help` and a bare `run` list every scene; `run SCENE --help` gives every parameter of it and
+    the options; `study --help` lists every study (it used to fail)."""
+    from clusterdyn.cli import main
+    from clusterdyn.scenes import all_scenes, get_scene
+    from clusterdyn.studies import study_names
+    assert main(["run", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in all_scenes()) and "--restart" in out
+    assert main(["run"]) == 2
+    out = capsys.readouterr().out
+    assert all(name in out for name in all_scenes())
+    assert main(["run", "taylor", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"  {p.name} = " in out for p in get_scene("taylor").params) and "--out DIR" in out
+    assert main(["study", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in study_names())
