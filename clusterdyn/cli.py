@@ -103,7 +103,7 @@ RUN_OPTIONS = (
     ("--set KEY=VALUE", "a scene parameter, with its unit (u=3km/s, r0=5um); repeat for more"),
     ("--config FILE.toml", "parameters from a TOML file (top-level 'scene' and a [params] table)"),
     ("--out DIR", "the folder for result.json, the H5MD file, PNG, CSV and the checkpoint"),
-    ("--json", "print the result as one JSON object on stdout"),
+    ("--json", "print the result as one JSON object on stdout (the progress bar stays on stderr)"),
     ("--quiet", "no table and no progress bar"),
     ("--restart CHECKPOINT", "continue a run from its checkpoint.h5 (same parameters)"),
     ("--threads N", "threads of the kernels (default: all)"),
@@ -161,7 +161,7 @@ def cmd_run(args):
     if args.ranks is not None or args.deck_only:
         raise InputError("--ranks/--deck-only", args.ranks if args.ranks is not None else "--deck-only",
                          "only with --engine lammps")
-    res = scene.run(overrides, out=out, progress=not (args.quiet or args.json), **kw)
+    res = scene.run(overrides, out=out, progress=not args.quiet, **kw)   # bars on stderr, also with --json
     _print_result(res, args)
     return 0
 

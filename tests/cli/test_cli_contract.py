@@ -159,3 +159,14 @@ def test_help_lists_the_scenes_the_studies_and_a_scenes_parameters(capsys):
     assert main(["study", "--help"]) == 0
     out = capsys.readouterr().out
     assert all(name in out for name in study_names())
+
+
+def test_json_keeps_the_progress_bar_on_stderr(tmp_path, capsys):
+    """--json prints one JSON object on stdout and still shows the progress bar on stderr."""
+    import json
+    from clusterdyn.cli import main
+    assert main(["run", "shock", "--json", "--set", "size=40x4x4", "--set", "fit_from=0", "--set", "h5md=false",
+                 "--out", str(tmp_path / "a")]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["D"]["unit"] == "km/s"
+    assert "step" in cap.err
