@@ -93,8 +93,8 @@ def _material_line(m):
         if kind == "murnaghan":
             text += f", Murnaghan cold curve (n {curve['n']:.6g})"
         elif kind == "tabulated":
-            text += (f", tabulated cold curve ({len(curve['delta'])} rows, Tait tail n1 "
-                     f"{curve.get('n_tail', float('nan')):.3g})")
+            text += (f", tabulated cold curve ({len(curve['delta'])} rows, {curve.get('tail', 'murnaghan')} "
+                     f"tail n {curve.get('n_tail', float('nan')):.3g})")
         else:
             text += f", cold curve {kind}"
     if m.get("E") is not None:

@@ -30,7 +30,7 @@ group, JSON text datasets (numbers in ASE units: Angstrom, eV, amu, ASE time)::
 
 Cold curves are stored so that they can be rebuilt without the library:
 ``{"kind": "murnaghan", "rho0", "c0", "n"}`` or ``{"kind": "tabulated",
-"rho0", "delta", "eps", "pressure", "n_tail"}`` (the rows; the tail exponent
+"rho0", "delta", "eps", "pressure", "n_tail", "tail"}`` (the rows; the tail exponent
 is recorded for reference); any other curve as ``{"kind": class name,
 "repr": ...}``, rebuilt from the library material of the same name.
 
@@ -88,7 +88,8 @@ def describe_curve(curve):
                 "delta": np.asarray(curve.delta_rows, float).tolist(),
                 "eps": np.asarray(curve.eps_rows, float).tolist(),
                 "pressure": np.asarray(curve.p_rows, float).tolist(),
-                "n_tail": float(getattr(curve, "n_tail", float("nan")))}
+                "n_tail": float(getattr(curve, "n_tail", float("nan"))),
+                "tail": str(getattr(curve, "tail", "murnaghan"))}
     return {"kind": type(curve).__name__, "repr": repr(curve)}
 
 
@@ -101,7 +102,9 @@ def curve_from_description(d):
     if kind == "murnaghan":
         return MurnaghanCurve(d["rho0"], d["c0"], d["n"])
     if kind == "tabulated":
-        c = TabulatedCurve(d["delta"], d["eps"], d["pressure"], d["rho0"])
+        tail = d.get("tail", "murnaghan")          # files written before the tail was stored: the default
+        c = TabulatedCurve(d["delta"], d["eps"], d["pressure"], d["rho0"],
+                           tail=tail.decode() if isinstance(tail, bytes) else str(tail))
         stored = d.get("n_tail")
         if stored is not None and np.isfinite(stored) and c.n_tail != stored:
             warnings.warn(f"cold curve rebuilt from the stored rows has the tail exponent "

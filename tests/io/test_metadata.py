@@ -336,3 +336,17 @@ def test_mca_pair_state_every_frame(tmp_path):
     two_material_run(cd, steps=10)
     with H5MDReader(cd) as r, pytest.raises(InputError, match="missing /connectivity/linked_pairs"):
         r.linked_pairs(0)
+
+
+def test_the_cold_curves_tail_travels_with_the_file():
+    """A tabulated curve's tail (murnaghan or tait) is stored and rebuilt; info names it as the material
+    library does (it said "Tait tail" for every tabulated curve)."""
+    from clusterdyn.io.metadata import curve_from_description, describe_curve
+    from clusterdyn.materials import get_material
+    for name, tail in (("Al", "murnaghan"), ("Al-tait", "tait")):
+        c = get_material(name).curve
+        d = describe_curve(c)
+        assert d["tail"] == tail
+        back = curve_from_description(d)
+        assert back.tail == tail and back.n_tail == c.n_tail
+        assert float(back.pressure(1.9)) == float(c.pressure(1.9))
