@@ -530,6 +530,8 @@ class SceneDef:
                     v = nv
             summaries.append(self.finish(v, stage))
         quantities, notes, extra = self.analyse(v, summaries)
+        if out is not None and LAST_CHECKPOINT.get("path") == str(out / CHECKPOINT):
+            files.append(out / CHECKPOINT)            # written by this run: listed with what it wrote
         res = SceneResult(self.name, quantities, 0.0, params=self.display(v), notes=list(notes),
                           extra=extra, files=[f for f in files if f])
         self.verdict(v, summaries, res)

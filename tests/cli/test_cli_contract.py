@@ -170,3 +170,13 @@ def test_json_keeps_the_progress_bar_on_stderr(tmp_path, capsys):
     cap = capsys.readouterr()
     assert json.loads(cap.out)["D"]["unit"] == "km/s"
     assert "step" in cap.err
+
+
+def test_the_checkpoint_is_among_the_files_a_run_wrote(tmp_path):
+    from clusterdyn.scenes import get_scene
+    res = get_scene("shock").run({"size": "40x4x4", "fit_from": "0", "h5md": "false", "checkpoint_every": "1"},
+                                 out=tmp_path, progress=False)
+    assert tmp_path / "checkpoint.h5" in res.files and (tmp_path / "checkpoint.h5").exists()
+    quiet = get_scene("shock").run({"size": "40x4x4", "fit_from": "0", "h5md": "false", "checkpoint_every": "0"},
+                                   out=tmp_path / "b", progress=False)
+    assert not any(f.name == "checkpoint.h5" for f in quiet.files)
