@@ -342,7 +342,8 @@ def plot_spall(summaries, v, path):
         ax.set_xlabel("x0 / r0 (material coordinate)")
         ax.set_ylabel("t (ns)")
         ax.set_title(f"{sm['name']}: stress in material coordinates")
-        ax.legend(fontsize=7, loc="upper left")
+        if ax.get_legend_handles_labels()[0]:      # no release crossing and no spall plane: no empty legend
+            ax.legend(fontsize=7, loc="upper left")
         ax = axs[row, 2]
         g, nn = sm["spectrum_g"], sm["spectrum_n"]
         ax.loglog(g, nn, "o")
