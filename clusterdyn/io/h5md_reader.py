@@ -398,7 +398,12 @@ class H5MDReader:
         return self.n_frames
 
     def __getitem__(self, frame):
-        return self.get_atoms(frame)
+        """One frame (an int) as Atoms, or a list of them for a slice or an ASE index string
+        (``reader[::2]``, ``reader[':']``, ``reader['-3:']``)."""
+        index = _index(frame)
+        if isinstance(index, slice):
+            return [self.get_atoms(i) for i in range(self.n_frames)[index]]
+        return self.get_atoms(index)
 
     def __iter__(self):
         for i in range(self.n_frames):
@@ -416,19 +421,35 @@ class H5MDReader:
         self.close()
 
 
+def _index(frame):
+    """An int, or a slice for a slice or an ASE index string (``':'``, ``'::2'``, ``'-1'``)."""
+    if isinstance(frame, str):
+        from ase.io.formats import string2index
+        try:
+            return string2index(frame)
+        except ValueError:
+            raise InputError("frame", frame, "an int, a slice or an ASE index string like ':' or '::2'") from None
+    if isinstance(frame, slice):
+        return frame
+    if isinstance(frame, (bool, np.bool_)) or not isinstance(frame, (int, np.integer)):
+        raise InputError("frame", frame, "an int, a slice or an ASE index string like ':' or '::2'")
+    return int(frame)
+
+
 def read_h5md(path, frame=-1):
-    """Read one frame of an H5MD file as :class:`ase.Atoms` (ASE units).
+    """Read a frame (or, with a slice, frames) of an H5MD file as :class:`ase.Atoms` (ASE units).
 
     Parameters
     ----------
     path : str or os.PathLike
         H5MD file (e.g. written by :class:`H5MDWriter`).
-    frame : int
-        Frame index; negative counts from the end (default: last frame).
+    frame : int, slice or str
+        Frame index; negative counts from the end (default: last frame).  A slice or an ASE
+        index string (``':'``, ``'::2'``, ``'-3:'``, as ``ase.io.read`` takes) gives a list.
 
     Returns
     -------
-    ase.Atoms
+    ase.Atoms, or a list of them for a slice
         Positions (Å), velocities (Å per ASE time, via momenta), masses
         (amu), numbers, cell, pbc, ``arrays`` for every stored extra
         per-particle series (``id``, ``material``, ...), forces (eV/Å) and
@@ -446,5 +467,6 @@ def read_h5md(path, frame=-1):
         Missing or unreadable file, not H5MD, frame out of range, unknown
         unit string.
     """
+    index = _index(frame)
     with H5MDReader(path) as reader:
-        return reader.get_atoms(frame)
+        return reader[index]

@@ -127,6 +127,13 @@ def test_read_h5md_round_trip(md_file):
                                rtol=0, atol=1e-12)        # wrapped + image: equal to round-off
     with pytest.raises(InputError, match="frame"):
         read_h5md(path, frame=6)
+    # slices as ase.io.read takes them: a list of frames
+    assert [a.info["step"] for a in read_h5md(path, ":")] == [0, 2, 4, 6, 8, 10]
+    assert [a.info["step"] for a in read_h5md(path, "-2:")] == [8, 10]
+    with H5MDReader(path) as r:
+        assert [a.info["step"] for a in r[::2]] == [0, 4, 8]
+    with pytest.raises(InputError, match="frame"):
+        read_h5md(path, "first")
 
 
 def test_rows_follow_ids_when_atoms_are_reordered(tmp_path):
