@@ -99,42 +99,29 @@ def _threads(args):
         set_max_threads(args.threads)
 
 
-RUN_OPTIONS = (
-    ("--set KEY=VALUE", "a scene parameter, with its unit (u=3km/s, r0=5um); repeat for more"),
-    ("--config FILE.toml", "parameters from a TOML file (top-level 'scene' and a [params] table)"),
-    ("--out DIR", "the folder for result.json, the H5MD file, PNG, CSV and the checkpoint"),
-    ("--json", "print the result as one JSON object on stdout (the progress bar stays on stderr)"),
-    ("--quiet", "no table and no progress bar"),
-    ("--restart CHECKPOINT", "continue a run from its checkpoint.h5 (same parameters)"),
-    ("--threads N", "threads of the kernels (default: all)"),
-    ("--engine numba|lammps", "clusterdyn's kernels (default) or LAMMPS (--ranks N, --deck-only)"),
-)
-
-
-def _print_run_help(scene_name):
-    """``clusterdyn run --help`` (the scenes) or ``clusterdyn run SCENE --help`` (its parameters)."""
+def _print_run_help(scene_name, parser):
+    """``clusterdyn run --help`` (the scenes) or ``clusterdyn run SCENE --help`` (its parameters),
+    then the options as argparse describes them."""
     from .scenes import all_scenes, get_scene
     if scene_name is None:
-        print("usage: clusterdyn run SCENE [--set KEY=VALUE ...] [options]\n\nscenes "
-              "(clusterdyn run SCENE --help gives a scene's parameters):")
+        print("scenes (clusterdyn run SCENE --help gives a scene's parameters):")
         for name, sc in sorted(all_scenes().items()):
             print(f"  {name:18s} {sc.description}")
     else:
         sc = get_scene(scene_name)
-        print(f"usage: clusterdyn run {scene_name} [--set KEY=VALUE ...] [options]\n\n{sc.description}\n")
+        print(f"{scene_name}: {sc.description}\n")
         print("parameters (--set KEY=VALUE; default, unit, meaning, range):")
         for p in sc.params:
             print(f"  {p.describe()}")
-    print("\noptions:")
-    for opt, what in RUN_OPTIONS:
-        print(f"  {opt:24s} {what}")
+    print()
+    print(parser.format_help())
     return 0
 
 
 def cmd_run(args):
     from .scenes import get_scene
     if args.help or args.scene is None:
-        code = _print_run_help(args.scene)
+        code = _print_run_help(args.scene, args.run_parser)
         return code if args.help else EXIT_INPUT
     _threads(args)
     overrides = {}
@@ -287,12 +274,17 @@ def build_parser():
     r = sub.add_parser("run", help="run a scene (clusterdyn run --help lists them)", add_help=False)
     r.add_argument("scene", nargs="?")
     r.add_argument("--help", "-h", action="store_true", help="the scenes, or a scene's parameters")
-    r.add_argument("--set", action="append", metavar="KEY=VALUE")
-    r.add_argument("--config", metavar="FILE.toml")
-    r.add_argument("--out", metavar="DIR")
-    r.add_argument("--json", action="store_true")
-    r.add_argument("--quiet", action="store_true")
-    r.add_argument("--restart", metavar="CHECKPOINT")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="a scene parameter, with its unit (u=3km/s, r0=5um); repeat for more")
+    r.add_argument("--config", metavar="FILE.toml",
+                   help="parameters from a TOML file (top-level 'scene' and a [params] table)")
+    r.add_argument("--out", metavar="DIR",
+                   help="the folder for result.json, the H5MD file, PNG, CSV and the checkpoint")
+    r.add_argument("--json", action="store_true",
+                   help="print the result as one JSON object on stdout (the progress bar stays on stderr)")
+    r.add_argument("--quiet", action="store_true", help="no table and no progress bar")
+    r.add_argument("--restart", metavar="CHECKPOINT",
+                   help="continue a run from its checkpoint.h5 (same parameters)")
     r.add_argument("--threads", type=int, metavar="N", help="threads of the kernels (default: all; "
                    "one is faster on a machine busy with other jobs)")
     r.add_argument("--engine", choices=("numba", "lammps"), default="numba",
@@ -302,7 +294,7 @@ def build_parser():
                    "default 1)")
     r.add_argument("--deck-only", action="store_true", help="--engine lammps: write the decks and the command "
                    "that analyses their dumps later (clusterdyn analyse SCENE DIR), run nothing")
-    r.set_defaults(func=cmd_run)
+    r.set_defaults(func=cmd_run, run_parser=r)
     an = sub.add_parser("analyse", help="a scene's analysis and report from the dumps of its LAMMPS decks")
     an.add_argument("scene")
     an.add_argument("dir")
@@ -354,6 +346,7 @@ def _sigint_handler():
         yield
     finally:
         signal.signal(signal.SIGINT, prev)
+        INTERRUPTED[0] = False          # the flag belongs to this handler's run: later work in the process starts clean
 
 
 def _interrupted():
