@@ -48,8 +48,6 @@ MAX_STEP_DISPLACEMENT = 0.25
 TINY_STEP = 1e-3
 #: masses within this factor of the clusters' are accepted
 MASS_FACTOR = 10.0
-#: ASE time units per ps
-PS_ASE = 1000.0 * units.fs
 
 
 def _on_engine(calc):
@@ -166,11 +164,11 @@ class DampedVerlet(MolecularDynamics):
         if _on_engine(calc):
             self._check_masses(atoms, calc)
             if self.stability_limit is not None and ts < TINY_STEP * self.stability_limit:
-                warnings.warn(f"DampedVerlet: timestep {ts / PS_ASE:.4g} ps is {ts / self.stability_limit:.2g} of "
-                              f"the stable step {self.stability_limit / PS_ASE:.4g} ps: the run takes "
+                warnings.warn(f"DampedVerlet: timestep {ts / units.PS:.4g} ps is {ts / self.stability_limit:.2g} of "
+                              f"the stable step {self.stability_limit / units.PS:.4g} ps: the run takes "
                               f"{self.stability_limit / ts:.2g} times more steps than it needs (clusters are "
                               "micrometres, not atoms: leave timestep=None for the default "
-                              f"{default_timestep(calc, u_max) / PS_ASE:.4g} ps)", stacklevel=2)
+                              f"{default_timestep(calc, u_max) / units.PS:.4g} ps)", stacklevel=2)
         super().__init__(atoms, ts, trajectory=trajectory, logfile=logfile, loginterval=loginterval,
                          **kwargs)
         self.check_interval = int(check_interval)
@@ -756,10 +754,10 @@ class DampedVerlet(MolecularDynamics):
                                  hint="a restart keeps the run's sort interval")
         if "ledger0" in st:
             self.ledger.start_values = {k: float(x) for k, x in st["ledger0"].items()}
-        have = {q.name for q in self.pieces}
+        have = {q.name: q for q in self.pieces}
         for name, qs in st.get("pieces", {}).items():
             if name in have:
-                next(q for q in self.pieces if q.name == name).set_state(qs)
+                have[name].set_state(qs)
             elif str(qs.get("kind", "")) in PIECE_KINDS:       # a checkpoint loaded without its scene
                 self.attach_piece(PIECE_KINDS[str(qs["kind"])].from_state(qs))
             else:

@@ -1,5 +1,6 @@
 """Pieces shared by the studies: parameters (with lists), running scenes, tables, files."""
 
+import contextlib
 import csv
 import hashlib
 import json
@@ -109,7 +110,7 @@ def display_value(param, value):
     return value
 
 
-_HELD_FOLDERS = []          # the study folders this process holds (their locks go with the process)
+_HELD_FOLDERS = contextlib.ExitStack()   # the study folders this process holds (their locks go with it)
 
 
 def out_folder(out, study, tag):
@@ -120,9 +121,7 @@ def out_folder(out, study, tag):
     folder = Path(out) if out is not None else Path("runs") / f"{study}-{tag}"
     folder.mkdir(parents=True, exist_ok=True)
     if out is None:
-        hold = lock_out(folder)
-        hold.__enter__()
-        _HELD_FOLDERS.append(hold)
+        _HELD_FOLDERS.enter_context(lock_out(folder))
     return folder
 
 
