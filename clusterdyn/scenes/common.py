@@ -20,26 +20,84 @@ def thermal_noise(atoms, rms, seed, exclude=None):
     atoms.set_velocities(atoms.get_velocities() + v)
 
 
-#: set once a run in this process has taken a step (numba kernels compiled or loaded from the cache)
-_STEPPED = []
+class _CompileLabel:
+    """Says "compiling kernels" on the bar while numba actually compiles (its ``numba:compile``
+    event, which a kernel loaded from the on-disk cache does not raise), and restores the label."""
+
+    def __init__(self, bar, desc):
+        self.bar, self.desc, self.depth, self.compiled = bar, desc, 0, False
+        self.listener = None
+        if bar is None:
+            return
+        from numba.core import event
+
+        label = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                label.depth += 1
+                label.compiled = True
+                if label.depth == 1:
+                    label.bar.set_description_str(f"{label.desc} (compiling kernels: first run after install "
+                                                  "or a code change, then cached on disk)")
+
+            def on_end(self, ev):
+                label.depth -= 1
+                if label.depth == 0:
+                    label.bar.set_description_str(label.desc)
+
+        self.listener = Listener()
+
+    def __enter__(self):
+        if self.listener is not None:
+            from numba.core import event
+            event.register("numba:compile", self.listener)
+        return self
+
+    def __exit__(self, *exc):
+        if self.listener is not None:
+            from numba.core import event
+            event.unregister("numba:compile", self.listener)
+        return False
+
+
+def _restart_rate(bar, n):
+    """Forget the time spent so far in the bar's rate (set-up, compiling or loading kernels):
+    the time left shows "?" until the next steps, then counts from their pace."""
+    bar.reset(total=bar.total)
+    bar.initial = bar.n = bar.last_print_n = n
+    bar.refresh()
+
+
+def _expected(expected, stop):
+    if expected is None and stop is not None:
+        expected = getattr(getattr(stop, "__self__", None), "expected_steps", None)
+    return expected
 
 
 def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkpoint=None,
-               checkpoint_every=0, save=None, stop=None):
+               checkpoint_every=0, save=None, stop=None, expected=None):
     """Run up to step ``nsteps``, calling ``on_frame(dyn)`` every ``nsteps/nframes`` steps.
 
     The frame at step 0 is taken unless the dynamics is resumed (``dyn.nsteps > 0``:
     a restart continues after its last frame).  Every ``checkpoint_every``
     frames (0 = never) ``save(checkpoint)`` writes the full state.  Shows one
-    tqdm bar over all steps with time left when ``progress``; the first step of
-    a process says "compiling kernels, first run only" while numba compiles
-    (or loads its on-disk cache).  ``stop(dyn)``, if given, is asked after
-    every frame; True ends the run there.  Returns the wall time of the
-    stepping alone.
+    tqdm bar over all steps with time left when ``progress``.  The first
+    step is taken alone; the bar shows no time left until the steps after
+    it move (its rate then leaves out the set-up and the kernels' start), and
+    says "compiling kernels" only while numba really compiles (the first run
+    after install or after a change of the code; later runs load the kernels
+    from numba's on-disk cache).  ``stop(dyn)``, if given, is asked after
+    every frame; True ends the run there.  ``expected(dyn)``, if given (or
+    the ``expected_steps(dyn)`` method of the object whose method ``stop``
+    is), returns the step at which the run is expected to stop (or None):
+    the bar counts to it instead of ``nsteps``, so that its time left is to
+    the expected stop.  Returns the wall time of the stepping alone.
     """
     every = max(1, int(round(nsteps / max(1, nframes))))
     bar = None
     done = dyn.nsteps
+    expected = _expected(expected, stop)
     if progress:
         from tqdm.auto import tqdm
         bar = tqdm(total=nsteps, initial=done, desc=desc, unit="step", leave=False, dynamic_ncols=True)
@@ -47,34 +105,37 @@ def run_frames(dyn, nsteps, nframes, on_frame, progress=True, desc="run", checkp
         on_frame(dyn)
     t_run = 0.0
     nframe = done // every
+    first = True
     try:
-        while done < nsteps:
-            k = min(every - done % every, nsteps - done)
-            t0 = time.perf_counter()
-            if not _STEPPED and k > 1:
-                if bar is not None:
-                    bar.set_description_str(f"{desc} (compiling kernels, first run only)")
-                dyn.run(1)
-                _STEPPED[:1] = [True]
-                if bar is not None:
-                    bar.set_description_str(desc)
-                    bar.update(1)
-                dyn.run(k - 1)
-                if bar is not None:
-                    bar.update(k - 1)
-            else:
-                dyn.run(k)
-                _STEPPED[:1] = [True]
-                if bar is not None:
-                    bar.update(k)
-            t_run += time.perf_counter() - t0
-            done += k
-            on_frame(dyn)
-            nframe += 1
-            if stop is not None and stop(dyn):
-                break
-            if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
-                save(checkpoint)
+        with _CompileLabel(bar, desc):
+            while done < nsteps:
+                k = min(every - done % every, nsteps - done)
+                t0 = time.perf_counter()
+                if first and k > 1:
+                    dyn.run(1)
+                    if bar is not None:
+                        _restart_rate(bar, done + 1)
+                    dyn.run(k - 1)
+                    if bar is not None:
+                        bar.update(k - 1)
+                else:
+                    dyn.run(k)
+                    if bar is not None:
+                        bar.update(k)
+                first = False
+                t_run += time.perf_counter() - t0
+                done += k
+                on_frame(dyn)
+                nframe += 1
+                if bar is not None and expected is not None:
+                    want = expected(dyn)
+                    if want is not None:
+                        bar.total = int(min(nsteps, max(done, want)))
+                        bar.refresh()
+                if stop is not None and stop(dyn):
+                    break
+                if checkpoint and checkpoint_every and nframe % checkpoint_every == 0 and done < nsteps:
+                    save(checkpoint)
     finally:
         if bar is not None:
             bar.close()
