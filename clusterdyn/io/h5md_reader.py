@@ -131,7 +131,7 @@ class H5MDReader:
         out = {k: k in self._elements
                for k in ("position", "velocity", "force", "species", "mass")}
         out["mass"] = out["mass"] or self._mass_ds is not None
-        out["edges"] = "box" in self._g and "edges" in self._g["box"]
+        out["edges"] = "box" in self._g and ("edges" in self._g["box"] or "cell" in self._g["box"])
         out["pairs"] = PAIRS in self._file
         return out
 
@@ -339,8 +339,9 @@ class H5MDReader:
             else:
                 pos = np.zeros((n, 3))
             cell = np.zeros((3, 3))
-            if "box" in g and "edges" in g["box"]:
-                e = g["box"]["edges"]
+            key = "edges" if "box" in g and "edges" in g["box"] else "cell"
+            if "box" in g and key in g["box"]:   # box/cell: clusterdyn's cell of an open box
+                e = g["box"][key]
                 if isinstance(e, h5group()):          # time-dependent box
                     ev, edges = e["value"], e["value"][i]
                 else:                                  # fixed box

@@ -179,6 +179,9 @@ class H5MDWriter:
                                      f"a key of atoms.arrays {sorted(atoms.arrays)}")
 
         self._pbc = np.array(atoms.pbc, dtype=bool)
+        #: where the cell goes: box/edges with a periodic axis (H5MD), else box/cell (readers then
+        #: see an open box; MDAnalysis applies no minimum image)
+        self._box_key = "edges" if self._pbc.any() else "cell"
         self._pair_state_arg = pair_state
         self._mass_fixed = True  # masses stored once (time-independent); files before: per frame
         self._mass_ref = None
@@ -270,7 +273,9 @@ class H5MDWriter:
         if self._mass_fixed:
             self._mass_ref = np.asarray(traj["mass"][()], dtype=np.float64)
         # the layout stored in the file
-        layout = {"edges": "edges" in traj["box"],
+        self._box_key = "edges" if "edges" in traj["box"] or (
+            "cell" not in traj["box"] and self._pbc.any()) else "cell"
+        layout = {"edges": self._box_key in traj["box"],
                   "particles": [k for k in traj if k != "box" and isinstance(traj[k], h5group())
                                 and "value" in traj[k]],
                   "observables": list(f["observables"]) if "observables" in f else [],
@@ -441,7 +446,11 @@ class H5MDWriter:
         self._time_ds.attrs["unit"] = UNITS["time"]
         self._new_value(traj, "position", frame["position"], UNITS["length"])
         if "edges" in frame:
-            self._new_value(traj["box"], "edges", frame["edges"], UNITS["length"], compress=False)
+            self._new_value(traj["box"], self._box_key, frame["edges"], UNITS["length"], compress=False)
+            if self._box_key == "cell":
+                traj["box/cell"].attrs["description"] = (
+                    "the Atoms' cell of an open box (every boundary 'none'): clusterdyn keeps it here, "
+                    "not in box/edges, so that readers (MDAnalysis) see no periodic box")
         self._new_value(traj, "velocity", frame["velocity"], UNITS["velocity"])
         if "force" in frame:
             self._new_value(traj, "force", frame["force"], UNITS["force"])
@@ -485,8 +494,9 @@ class H5MDWriter:
         traj = f[TRAJ]
         out = [traj[k]["value"] for k in traj if k != "box" and isinstance(traj[k], h5group())
                and "value" in traj[k]]
-        if "edges" in traj["box"]:
-            out.append(traj["box/edges/value"])
+        for key in ("edges", "cell"):
+            if key in traj["box"] and isinstance(traj["box"][key], h5group()):
+                out.append(traj["box"][key]["value"])
         if PAIRS in f:
             out.append(f[PAIRS]["value"])
         if "observables" in f:
@@ -744,7 +754,7 @@ class H5MDWriter:
             row[:len(p)] = p
             ds[i] = row
         if "edges" in frame:
-            traj["box/edges/value"][i] = frame["edges"]
+            traj["box"][self._box_key]["value"][i] = frame["edges"]
         if "force" in frame:
             traj["force/value"][i] = frame["force"]
         if "image" in frame:

@@ -55,7 +55,7 @@ def h5md_info(path):
             "time_end_ps": float(times_ps[-1]) if n else None,
             "pbc": [bool(p) for p in r.pbc],
             "series": [k for k in ("position", "velocity", "force", "species", "mass")
-                       if has[k]] + (["box/edges"] if has["edges"] else []),
+                       if has[k]] + ([("box/edges" if r.pbc.any() else "box/cell")] if has["edges"] else []),
             "per_particle": r.per_particle,
             "observables": r.observables,
             "units": r.units(),
