@@ -14,7 +14,13 @@ File layout (``N`` particles, ``F`` frames)::
         creator                +name 'clusterdyn', +version
     /particles/trajectory      (the name MDAnalysis looks up without topology)
         box                    +dimension 3, +boundary 'periodic'/'none' per axis
-            edges/{step,time,value (F, 3, 3) Angstrom}     only if the cell is not all zero
+            edges/{step,time,value (F, 3, 3) Angstrom}     only if some axis is periodic (H5MD:
+                                                            MDAnalysis then reads a box)
+            cell/{step,time,value (F, 3, 3) Angstrom}      instead, when every boundary is 'none'
+                                                            and the cell is not all zero: the
+                                                            Atoms' cell, which readers that take
+                                                            a box from edges (MDAnalysis) ignore,
+                                                            so they apply no minimum image
         position/{step,time,value (F, N, 3) float64 'Angstrom'}
         velocity/{step,time,value (F, N, 3) float64 'Angstrom ps-1'}
         force/{step,time,value (F, N, 3) float64 'kJ mol-1 Angstrom-1'}  only with a calculator

@@ -17,9 +17,26 @@ format="H5MD")``; once this module is imported the parser is also known by
 name, ``topology_format="CDH5MD"``.  The topology (read from the first
 frame; ids, materials and grains are fixed in a clusterdyn run) holds
 ``ids``, ``masses``, ``types`` (material names, else material ids, else
-atomic numbers), ``materials`` and ``grains`` (when the file has them), one
-residue and one segment.  Positions are the wrapped ones MDAnalysis reads
-(:func:`clusterdyn.io.read_h5md` gives unwrapped ones).
+atomic numbers), ``charges`` (zero: clusters carry no charge; MDAnalysis'
+``LinearDensity`` needs the attribute), ``materials`` and ``grains`` (when
+the file has them), one residue and one segment.
+
+Periodicity.  MDAnalysis knows only "every axis periodic" (a box) or "none"
+(``dimensions`` None): it reads the box from ``box/edges`` and ignores H5MD's
+per-axis ``boundary``.  clusterdyn writes ``box/edges`` only when some axis is
+periodic (an open box keeps its cell in ``box/cell``), so a sphere or a
+free-flying sample is read without a box and without minimum images.  A box
+with open and periodic axes (the shock: x open, y and z periodic) has
+``box/edges``; :func:`universe` then lengthens, every frame, each open axis's
+edge to its length plus twice the particles' spread along it, so that no
+pair is ever imaged across the open axis while the periodic axes keep their
+box (a plain ``MDAnalysis.Universe(path)`` would treat x as periodic).
+
+Unwrapped coordinates.  Periodic axes are stored wrapped with an ``image``
+series (H5MD); MDAnalysis reads the wrapped positions.  ``universe(path,
+unwrap=True)`` adds the images back every frame (``position + image @ box``),
+as ``EinsteinMSD`` and other displacement analyses need;
+:func:`clusterdyn.io.read_h5md` always gives unwrapped positions.
 """
 
 import numpy as np
@@ -30,8 +47,10 @@ from clusterdyn.io.h5md_reader import H5MDReader
 try:
     import MDAnalysis
     from MDAnalysis.core.topology import Topology
-    from MDAnalysis.core.topologyattrs import (AtomAttr, Atomids, Atomtypes, Masses, Resids,
-                                               Resnums, Segids)
+    from MDAnalysis.core.topologyattrs import (AtomAttr, Atomids, Atomtypes, Charges, Masses,
+                                               Resids, Resnums, Segids)
+    from MDAnalysis.lib.mdamath import triclinic_box
+    from MDAnalysis.transformations.base import TransformationBase
     from MDAnalysis.topology.base import TopologyReaderBase
     HAS_MDANALYSIS = True
 except ImportError:       # pragma: no cover - MDAnalysis is an optional dependency
@@ -117,6 +136,7 @@ if HAS_MDANALYSIS:
             a = topology_arrays(self.filename)
             n = len(a["masses"])
             attrs = [Atomids(a["ids"]), Atomtypes(a["types"]), Masses(a["masses"]),
+                     Charges(np.zeros(n)),
                      Resids(np.array([1])), Resnums(np.array([1])),
                      Segids(np.array(["SYSTEM"], dtype=object))]
             if "materials" in a:
@@ -125,25 +145,69 @@ if HAS_MDANALYSIS:
                 attrs.append(Grains(a["grains"]))
             return Topology(n, 1, 1, attrs=attrs, atom_resindex=np.zeros(n, dtype=int),
                             residue_segindex=np.zeros(1, dtype=int))
+    class _FileBox(TransformationBase):
+        """Per frame: unwrapped positions (``unwrap``: position + image @ box, box and images from
+        the file) and the box MDAnalysis should use: None when no axis is periodic, else the
+        file's box with every open axis lengthened past twice the particles' spread along it."""
+
+        def __init__(self, path, unwrap):
+            super().__init__(max_threads=1, parallelizable=True)
+            import h5py
+            self._f = h5py.File(path, "r")
+            traj = self._f["particles/trajectory"]
+            b = np.atleast_1d(traj["box"].attrs.get("boundary", ["none"] * 3))
+            self.periodic = np.array([(x.decode() if isinstance(x, bytes) else str(x)) == "periodic"
+                                      for x in b], dtype=bool)
+            self._edges = traj["box/edges/value"] if "edges" in traj["box"] else None
+            self._image = traj["image/value"] if unwrap and "image" in traj else None
+
+        def _cell(self, frame):
+            e = np.asarray(self._edges[frame], dtype=np.float64)
+            return np.diag(e) if e.shape == (3,) else e
+
+        def _transform(self, ts):
+            if self._edges is None or not self.periodic.any():
+                ts.dimensions = None
+                return ts
+            cell = self._cell(ts.frame)
+            if self._image is not None:
+                ts.positions = ts.positions + (self._image[ts.frame].astype(np.float64) @ cell
+                                               ).astype(ts.positions.dtype)
+            if not self.periodic.all():
+                pos = ts.positions.astype(np.float64)
+                for d in np.flatnonzero(~self.periodic):
+                    length = np.linalg.norm(cell[d])
+                    spread = float(np.nanmax(pos[:, d]) - np.nanmin(pos[:, d])) if len(pos) else 0.0
+                    cell[d] *= (length + 2.0 * spread + 1.0) / length if length > 0 else 1.0
+                ts.dimensions = triclinic_box(*cell)
+            return ts
+
+        def close(self):
+            self._f.close()
 else:                     # pragma: no cover
     H5MDTopologyParser = None
 
 
-def universe(path, **kwargs):
+def universe(path, unwrap=False, **kwargs):
     """An MDAnalysis Universe of a clusterdyn H5MD file, with masses and ids.
 
     Parameters
     ----------
     path : str or os.PathLike
         H5MD file written by :class:`clusterdyn.io.H5MDWriter`.
+    unwrap : bool, default False
+        Unwrapped positions (the file's ``image`` series added back), for
+        ``EinsteinMSD`` and other displacements across periodic boundaries.
     **kwargs
         Passed to :class:`MDAnalysis.Universe` (e.g. ``in_memory=True``).
 
     Returns
     -------
     MDAnalysis.Universe
-        Masses (amu), ``ids``, ``types`` (material names), ``materials`` and
-        ``grains`` (when stored); MDAnalysis units (Angstrom, ps, kJ/mol).
+        Masses (amu), ``ids``, ``types`` (material names), ``charges`` (0),
+        ``materials`` and ``grains`` (when stored); MDAnalysis units
+        (Angstrom, ps, kJ/mol).  No box when no axis is periodic; open axes
+        of a partly periodic box are never imaged (module docstring).
         Loading emits no warning.
 
     Raises
@@ -153,5 +217,10 @@ def universe(path, **kwargs):
     """
     _require()
     topology_arrays(path)          # the file's problems as one-line InputErrors first
-    return MDAnalysis.Universe(str(path), topology_format=H5MDTopologyParser, format="H5MD",
-                               **kwargs)
+    u = MDAnalysis.Universe(str(path), topology_format=H5MDTopologyParser, format="H5MD", **kwargs)
+    box = _FileBox(str(path), bool(unwrap))
+    if box._edges is not None or box._image is not None:
+        u.trajectory.add_transformations(box)
+    else:
+        box.close()
+    return u
