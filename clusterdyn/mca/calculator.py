@@ -16,6 +16,10 @@ response functions then).  Called at the committed positions it returns the
 committed forces.
 """
 
+import sys
+import warnings
+import weakref
+
 import numpy as np
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 from ase.stress import full_3x3_to_voigt_6_stress
@@ -38,16 +42,36 @@ class MCA(Calculator):
         Use this state (otherwise built from the atoms at the first call, or by
         :class:`MCADynamics`).
 
-    Properties: ``energy`` / ``free_energy`` (eV; the elastic energy of the
-    automata from their stress tensors), ``energies`` (N,), ``forces`` (N, 3)
-    eV/Angstrom, ``torques`` (N, 3) eV, ``stresses`` (N, 6) Voigt per automaton
-    (tension positive, eV/Angstrom^3), ``stress`` (6,) volume-averaged over the
-    cell (3D cells only).
+    Properties (ASE's conventions):
+
+    - ``energy`` / ``free_energy`` (eV): the energy that, with the Atoms'
+      (translational) kinetic energy, is conserved without damping, so that
+      ``atoms.get_total_energy()`` and MDLogger's Etot are the conserved
+      total: the rotational kinetic energy of the automata (ASE's Atoms know
+      only translation) plus, under an :class:`~clusterdyn.mca.MCADynamics`,
+      the stored work of the pair forces (``dyn.stored_work``, docs/mca.md
+      "Energy"), or, without one, the elastic energy of the automata from
+      their stress tensors;
+    - ``energies`` (N,): per automaton, elastic + rotational (their sum is
+      ``energy`` without a dynamics; under one ``energy`` differs from it by
+      the integration residual of the ledger, ``dyn.ledger()``);
+    - ``forces`` (N, 3) eV/Angstrom, ``torques`` (N, 3) eV;
+    - ``stress`` (6,) Voigt, eV/Angstrom^3, tension positive: the automata's
+      stresses averaged over the cell volume (3D cells only);
+    - ``stresses`` (N, 6): per automaton ``sigma_i Omega_i / V``, extensive as
+      in ASE (they sum to ``stress``; 3D cells only), like
+      :class:`~clusterdyn.calculators.ClusterDynamics`;
+    - ``automaton_stresses`` (N, 6): the automata's own (intensive) stress
+      tensors ``sigma_i`` (any cell).
+
+    ``parameters`` / ``todict()`` name the materials, the interfaces and ``dim``.
+    Only :class:`~clusterdyn.mca.MCADynamics` integrates MCA (rotations, pair
+    history); another ASE integrator warns once.
     """
 
     implemented_properties = ["energy", "free_energy", "energies", "forces", "torques", "stress",
-                              "stresses"]
-    default_parameters = {}
+                              "stresses", "automaton_stresses"]
+    default_parameters = {"materials": None, "interfaces": None, "dim": None}
     #: per-particle arrays the result depends on (besides positions)
     state_arrays = ("theta", "id", "material", "radius")
 
@@ -59,6 +83,48 @@ class MCA(Calculator):
         self.state = state
         self.trial = None
         self._state_version = None
+        self._dynamics = None          # weakref to the MCADynamics driving this calculator
+        self._warned_driver = False
+        self._set_parameters()
+
+    def _set_parameters(self):
+        """``parameters`` as plain values: material names, interfaces as [m1, m2, sigma_t, sigma_c]."""
+        mats = self.materials
+        if mats is None and self.state is not None:
+            mats = self.state.materials
+        names = None if mats is None else [str(getattr(m, "name", m)) for m in mats]
+        inter = None if self.interfaces is None else [
+            [str(getattr(a, "name", a)), str(getattr(b, "name", b)), float(v[0]), float(v[1])]
+            for (a, b), v in self.interfaces.items()]
+        dim = self.dim if self.dim is not None or self.state is None else self.state.dim
+        self.parameters.update(materials=names, interfaces=inter,
+                               dim=None if dim is None else int(dim))
+
+    def attach_dynamics(self, dyn):
+        """Called by :class:`~clusterdyn.mca.MCADynamics`: ``energy`` then includes its stored work."""
+        self._dynamics = weakref.ref(dyn)
+
+    def _driver(self):
+        return None if self._dynamics is None else self._dynamics()
+
+    def _warn_foreign_integrator(self):
+        """Warn once when an ASE MolecularDynamics other than MCADynamics drives this calculator."""
+        if self._warned_driver or self._driver() is not None:
+            return
+        from ase.md.md import MolecularDynamics
+        f = sys._getframe(2)
+        for _ in range(30):
+            if f is None:
+                break
+            obj = f.f_locals.get("self")
+            if isinstance(obj, MolecularDynamics):
+                self._warned_driver = True
+                warnings.warn(f"{type(obj).__name__} drives an MCA calculator: it ignores the automata's "
+                              "rotations (torques) and never commits the pair history, so links neither "
+                              "break nor deform plastically; integrate MCA with clusterdyn.mca.MCADynamics",
+                              stacklevel=2)
+                break
+            f = f.f_back
 
     # --------------------------------------------------------------- ASE cache
     def check_state(self, atoms, tol=1e-15):
@@ -83,25 +149,55 @@ class MCA(Calculator):
         super().calculate(atoms, properties, system_changes)
         if "stress" in properties and self.atoms.cell.rank != 3:
             raise PropertyNotImplementedError("stress needs a 3D cell (use 'stresses' per automaton)")
+        self._warn_foreign_integrator()
         st = self.setup(self.atoms)
+        if self.parameters.get("materials") is None:
+            self._set_parameters()
         out = self.evaluate(self.atoms, st)
         self.trial = out
         self._state_version = st.version
         self._fill_results(out)
 
+    def rotational_energies(self, atoms):
+        """Rotational kinetic energy of each automaton, ``J w^2 / 2`` (eV; spheres
+        ``J = m d^2/10``, plane strain discs ``m d^2/8``, as :class:`MCADynamics`)."""
+        w = atoms.arrays.get("omega")
+        if w is None or "radius" not in atoms.arrays:
+            return np.zeros(len(atoms))
+        d = 2.0 * np.asarray(atoms.arrays["radius"], float)
+        dim = self.state.dim if self.state is not None else (self.dim or 3)
+        J = atoms.get_masses() * d * d / (8.0 if dim == 2 else 10.0)
+        return 0.5 * J * np.sum(np.asarray(w, float) ** 2, axis=1)
+
     def _fill_results(self, out):
-        e = out["e_n"]
-        self.results["energies"] = e.copy()
+        e = out["e_n"] + self.rotational_energies(self.atoms)
+        self.results["energies"] = e
         self.results["energy"] = float(e.sum())
         self.results["free_energy"] = float(e.sum())
         self.results["forces"] = out["f_nc"].copy()
         self.results["torques"] = out["t_nc"].copy()
         s = out["s_ncc"]
-        self.results["stresses"] = full_3x3_to_voigt_6_stress(s)
+        self.results["automaton_stresses"] = full_3x3_to_voigt_6_stress(s)
         if self.atoms.cell.rank == 3:
             om = out["omega_n"]
-            tot = (s * om[:, None, None]).sum(axis=0) / self.atoms.get_volume()
-            self.results["stress"] = full_3x3_to_voigt_6_stress(tot)
+            per = s * (om / self.atoms.get_volume())[:, None, None]
+            self.results["stresses"] = full_3x3_to_voigt_6_stress(per)
+            self.results["stress"] = full_3x3_to_voigt_6_stress(per.sum(axis=0))
+
+    def get_property(self, name, atoms=None, allow_calculation=True):
+        if name == "stresses" and (atoms if atoms is not None else self.atoms) is not None \
+                and (atoms if atoms is not None else self.atoms).cell.rank != 3:
+            raise PropertyNotImplementedError("MCA 'stresses' are per cell volume (ASE): they need a 3D "
+                                              "cell; 'automaton_stresses' are the automata's own tensors")
+        value = super().get_property(name, atoms, allow_calculation)
+        dyn = self._driver()
+        if name in ("energy", "free_energy") and value is not None and dyn is not None:
+            a = atoms if atoms is not None else self.atoms
+            value = float(dyn.stored_work + self.rotational_energies(a).sum())
+        return value
+
+    def get_automaton_stresses(self, atoms=None):
+        return self.get_property("automaton_stresses", atoms)
 
     def evaluate(self, atoms, st):
         """Trial evaluation: a dict of arrays (forces, torques, tensors, trial pair forces)."""

@@ -124,6 +124,7 @@ class MCADynamics(MolecularDynamics):
             from .state import MCAState
             calc.state = MCAState.from_dict(atoms, state, calc.materials, calc.interfaces, calc.dim)
         self.state = calc.setup(atoms)
+        calc.attach_dynamics(self)
         st = self.state
         self.contact = contact
         if contact is not None:

@@ -229,7 +229,7 @@ def uniaxial(material, mode="tension", d=1.0, size=(16, 5, 5), packing="fcc", st
 
 def uniaxial_per_particle(dyn, npairs0):
     """H5MD per-automaton data of a uniaxial run: stress tensor (Voigt), broken set-up links, links."""
-    return {"mca_stress": lambda a: a.calc.get_property("stresses", a),
+    return {"mca_stress": lambda a: a.calc.get_property("automaton_stresses", a),
             "broken_links": lambda a: broken_links(dyn.state, npairs0)[dyn.state.pair_rows(a)[5]],
             "links": lambda a: _links(dyn.state, a)}
 

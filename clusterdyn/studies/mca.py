@@ -122,7 +122,7 @@ def shear_modulus(mat, packing, size=5.0, gamma=1e-6, relax=None, seed=0):
         atoms.set_constraint(Piston(held, 0.0))            # the faces held at rest, not rotating
         _relax(atoms, relax, hold_layer_rotation=True)
         atoms.set_constraint()
-    s = atoms.calc.get_property("stresses", atoms)
+    s = atoms.calc.get_property("automaton_stresses", atoms)
     om = atoms.calc.state.per_atom("omega_n", atoms)
     mid = np.abs(atoms.positions[:, 1] - ymid) < 0.25 * h
     sxy = np.sum(s[mid, 5] * om[mid]) / np.sum(om[mid])

@@ -60,7 +60,7 @@ def test_rigid_rotation_no_stress(packing):
     c = atoms.positions.mean(axis=0)
     atoms.positions = (atoms.positions - c) @ R.T + c + np.array([1.0, 2.0, -3.0])
     atoms.arrays["theta"][:] = rv
-    s = atoms.calc.get_property("stresses", atoms)
+    s = atoms.calc.get_property("automaton_stresses", atoms)
     f = atoms.get_forces()
     t = atoms.calc.get_property("torques", atoms)
     E = elastic_material(0.3).E

@@ -94,7 +94,7 @@ def test_traction_presses_a_plane_strain_block():
     assert tr.area == pytest.approx(atoms.cell[0, 0] * 1.0)
     dyn.run(2000)
     assert tr.force[1] == pytest.approx(P * tr.area, rel=1e-3) and abs(tr.normal_velocity) < 1e-6 * wave_speeds(mat)[0]
-    s = atoms.calc.get_property("stresses", atoms)
+    s = atoms.calc.get_property("automaton_stresses", atoms)
     mid = np.abs(y - 0.5 * (y.min() + y.max())) < 0.6 * d           # the two middle rows
     assert s[mid, 1].mean() == pytest.approx(-P, rel=1e-2)
     assert np.all(atoms.positions[:, 2] == 0.0) and np.all(atoms.arrays["omega"][:, :2] == 0.0)

@@ -63,9 +63,9 @@ def test_switching_keeps_a_homogeneous_stress_and_momentum():
     F = np.array([[1.0, 2e-4, 0.0], [0.0, 1.0 - 1e-4, 0.0], [0.0, 0.0, 1.0 - 3e-4]])
     atoms.set_positions(atoms.positions @ F.T)
     dyn._evaluate(commit=True)
-    s0 = atoms.calc.get_property("stresses", atoms).copy()
+    s0 = atoms.calc.get_property("automaton_stresses", atoms).copy()
     dyn.remesh()
-    s1 = atoms.calc.get_property("stresses", atoms)
+    s1 = atoms.calc.get_property("automaton_stresses", atoms)
     # the automata whose new cells are complete (sum_j q S n n = Omega I: under the shear the
     # degenerate vertices of the fcc cell split and every inner cell gains two small faces)
     st = dyn.state

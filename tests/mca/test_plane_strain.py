@@ -23,7 +23,7 @@ def test_plane_strain_constants(packing, nu):
     atoms.set_cell(atoms.cell.array @ F, scale_atoms=True)
     if packing == "random":
         MCADynamics(atoms, damping=0.15).run(300)
-    s = atoms.calc.get_property("stresses", atoms)
+    s = atoms.calc.get_property("automaton_stresses", atoms)
     om = atoms.calc.state.per_atom("omega_n", atoms)
     sxx = (s[:, 0] * om).sum() / om.sum() / e
     syy = (s[:, 1] * om).sum() / om.sum() / e
