@@ -189,6 +189,8 @@ class ClusterDynamics(Calculator):
     def _check_types(self, atoms):
         mid = atoms.arrays.get("material")
         n = len(atoms)
+        if mid is None and "tags" in atoms.arrays and "cd_materials" in atoms.info:
+            mid = atoms.arrays["tags"]     # Atoms back from an ASE .traj (DampedVerlet(trajectory=))
         if mid is None:
             if len(self.potentials) == 1:
                 return np.zeros(n, np.int64)

@@ -96,7 +96,13 @@ class DampedVerlet(MolecularDynamics):
         writer orders its rows by it.  None (default): the order is never
         changed.  Needs the ClusterDynamics calculator.
     trajectory, logfile, loginterval :
-        As for ASE's MolecularDynamics.
+        As for ASE's MolecularDynamics (``append_trajectory=True`` appends).  Each
+        trajectory frame carries the potential energy and the conservative
+        forces (without damping) on a SinglePointCalculator, and the material
+        ids as ASE ``tags`` (which ``.traj`` keeps: ``arrays['material']`` it
+        drops), so that ``ase.io.read`` gives Atoms a ClusterDynamics takes
+        again (it reads the ids from the tags when ``arrays['material']`` is
+        missing; the names and r0 travel in ``atoms.info``).
 
     Attributes
     ----------
@@ -169,8 +175,18 @@ class DampedVerlet(MolecularDynamics):
                               f"{self.stability_limit / ts:.2g} times more steps than it needs (clusters are "
                               "micrometres, not atoms: leave timestep=None for the default "
                               f"{default_timestep(calc, u_max) / units.PS:.4g} ps)", stacklevel=2)
-        super().__init__(atoms, ts, trajectory=trajectory, logfile=logfile, loginterval=loginterval,
+        append = bool(kwargs.pop("append_trajectory", False))
+        super().__init__(atoms, ts, trajectory=None, logfile=logfile, loginterval=loginterval,
                          **kwargs)
+        self._trajectory = None
+        if trajectory is not None:
+            if hasattr(trajectory, "write"):
+                self._trajectory = trajectory
+            else:
+                from ase.io.trajectory import Trajectory
+                self._trajectory = self.closelater(Trajectory(trajectory, mode="a" if append else "w"))
+            self.trajectory = self._trajectory
+            self.attach(self._write_trajectory, interval=loginterval)
         self.check_interval = int(check_interval)
         self._own_forces = False
         self._fbuf = None
@@ -186,6 +202,18 @@ class DampedVerlet(MolecularDynamics):
         if sort_interval is not None:
             self.set_sort_interval(sort_interval)
         self._drives()
+
+    def _write_trajectory(self):
+        """A trajectory frame: energy and conservative forces, material ids as tags."""
+        atoms = self.atoms
+        snap = atoms.copy()
+        if "material" in atoms.arrays:
+            snap.set_tags(np.asarray(atoms.arrays["material"], dtype=int))
+        props = {}
+        if atoms.calc is not None:
+            props["energy"] = atoms.calc.get_property("energy", atoms)
+            props["forces"] = atoms.calc.get_property("forces", atoms)
+        self._trajectory.write(snap, **props)
 
     @staticmethod
     def _check_masses(atoms, calc):
