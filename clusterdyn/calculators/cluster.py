@@ -6,7 +6,7 @@ from ase.calculators.calculator import Calculator, PropertyNotImplementedError, 
 from ..engine import CDEngine
 from ..errors import InputError
 from ..materials import get_material
-from ..neighbors import NeighborList
+from ..neighbors import NeighborList, check_cell
 from ..potentials import DEFAULT_RC, N_BINS, ClusterPotential, check_rc
 
 #: arrays besides ASE's own whose change invalidates cached results
@@ -298,9 +298,40 @@ class ClusterDynamics(Calculator):
         return np.ascontiguousarray(bonds, np.int64), np.ascontiguousarray(ids, np.int64)
 
     # -- ASE ---------------------------------------------------------------------------
+    def _refuse_triclinic(self, atoms):
+        """A periodic cell must be orthorhombic.  Refused: one-line InputError, and Atoms changed by
+        a caller since the last calculation (a cell filter's or optimiser's step) get back the cell
+        and positions of that calculation, so the exception leaves no strained cell behind."""
+        if atoms is None or not np.any(atoms.pbc):
+            return
+        try:
+            check_cell(atoms.cell.array, atoms.pbc)
+        except InputError:
+            refused = np.round(atoms.cell.array, 6).tolist()
+            last = getattr(self, "_last_box", None)   # (cell, positions, numbers) of the last calculation
+            back = ""
+            if last is not None and len(last[1]) == len(atoms) and np.array_equal(last[2], atoms.numbers):
+                atoms.set_cell(last[0], scale_atoms=False)
+                atoms.positions = last[1]
+                back = "; the Atoms keep the cell and positions of the last calculation"
+            raise InputError("atoms.cell", refused, "an orthorhombic cell when any axis is periodic",
+                             hint="ClusterDynamics does not support triclinic periodic cells (see the "
+                                  "ASE users' guide, 'Triclinic cells')" + back) from None
+
+    def calculate_numerical_stress(self, atoms, d=1e-6, voigt=True):
+        """Refused before the cell is touched: finite-difference shears make the periodic cell
+        triclinic.  The analytic virial stress is ``atoms.get_stress()``."""
+        if atoms is not None and np.any(atoms.pbc):
+            raise InputError("calculate_numerical_stress", "a periodic cell",
+                             "atoms.get_stress() (analytic virial stress; the finite-difference shears "
+                             "need triclinic periodic cells, which ClusterDynamics does not support)")
+        return Calculator.calculate_numerical_stress(self, atoms, d=d, voigt=voigt)
+
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        self._refuse_triclinic(atoms)
         Calculator.calculate(self, atoms, properties, system_changes)
-        atoms = self.atoms
+        atoms = self.atoms               # ASE's copy
+        self._last_box = (atoms.cell.array, atoms.positions, atoms.numbers)
         want_pp = "energies" in properties or "stresses" in properties or "virials" in properties
         out = self.compute(atoms, per_particle=want_pp)
         self.results["energy"] = out["energy"]
