@@ -142,6 +142,8 @@ class MCA(Calculator):
         """Build the MCA state (tessellation, pair table) for ``atoms`` if not done yet."""
         if self.state is None:
             self.state = MCAState(atoms, self.materials, self.interfaces, self.dim)
+        if self.parameters.get("materials") is None:
+            self._set_parameters()
         return self.state
 
     # --------------------------------------------------------------- evaluation
@@ -151,8 +153,6 @@ class MCA(Calculator):
             raise PropertyNotImplementedError("stress needs a 3D cell (use 'stresses' per automaton)")
         self._warn_foreign_integrator()
         st = self.setup(self.atoms)
-        if self.parameters.get("materials") is None:
-            self._set_parameters()
         out = self.evaluate(self.atoms, st)
         self.trial = out
         self._state_version = st.version

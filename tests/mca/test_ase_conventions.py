@@ -50,6 +50,7 @@ def test_stresses_are_extensive_and_sum_to_the_stress():
 def test_total_energy_includes_rotation_and_stored_work_and_is_conserved():
     atoms = _body()
     dyn = MCADynamics(atoms)
+    assert atoms.calc.todict()["materials"] == [atoms.calc.state.materials[0].name]
     log = io.StringIO()
     dyn.attach(MDLogger(dyn, atoms, log, peratom=False), interval=50)
     E0 = atoms.get_total_energy()
