@@ -9,6 +9,7 @@ Then ``trajectory_profiles(path, exclude="drives")`` computes them again from th
 Run: python examples/profiles_from_file.py [OUTDIR]
 """
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -23,7 +24,8 @@ from clusterdyn.scenes.shock import build_shock, run_shock
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "runs/profiles_from_file")
 out.mkdir(parents=True, exist_ok=True)
 path = out / "shock.h5md"
-setup = build_shock()                                   # the main job's defaults
+# the main job's defaults (CLUSTERDYN_EXAMPLES_TINY=1, as the tests run it: a 40x3x3 sample)
+setup = build_shock(size=(40, 3, 3)) if os.environ.get("CLUSTERDYN_EXAMPLES_TINY") == "1" else build_shock()
 atoms, calc, dyn = setup.atoms, setup.calc, setup.dyn
 area = atoms.cell[1, 1] * atoms.cell[2, 2]
 obs = {"piston_force": (lambda a: -setup.piston.force[0] / units.N, "N"),

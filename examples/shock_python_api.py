@@ -3,6 +3,8 @@
 Run: python examples/shock_python_api.py
 """
 
+import os
+
 import numpy as np
 
 from clusterdyn import units
@@ -14,7 +16,8 @@ from clusterdyn.md import DampedVerlet, Piston
 
 r0 = 5 * units.um
 u = 4 * units.km_s
-atoms = fcc_packing("Al", r0, size=(40, 4, 4), pbc=(False, True, True))
+tiny = os.environ.get("CLUSTERDYN_EXAMPLES_TINY") == "1"   # the tests' setting: a shorter run
+atoms = fcc_packing("Al", r0, size=(24, 3, 3) if tiny else (40, 4, 4), pbc=(False, True, True))
 atoms.calc = ClusterDynamics(rc=1.15)
 
 # the first two atomic planes are the piston
@@ -35,7 +38,7 @@ def frame():
 
 
 dyn.attach(frame, interval=40)
-dyn.run(1200)
+dyn.run(600 if tiny else 1200)
 state = tracker.result()
 ref = hugoniot("Al").D(u)
 print(f"D = {state.D_fit / units.km_s:.3f} km/s (Al-1100: {ref / units.km_s:.3f} km/s, "
