@@ -42,6 +42,8 @@ class MCA(Calculator):
         Use this state (otherwise built from the atoms at the first call, or by
         :class:`MCADynamics`).
 
+    Notes
+    -----
     Properties (ASE's conventions):
 
     - ``energy`` / ``free_energy`` (eV): the energy that, with the Atoms'
