@@ -31,7 +31,8 @@ import numpy as np
 from .. import units
 from ..errors import InputError
 from ..scenes.base import Param
-from .common import ListParam, format_table, markdown_table, out_folder, parse_params, write_csv, write_json
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, write_csv
 
 PARAMS = [
     ListParam("across", (6, 10, 16), "automata across the diameter (comma list)", low=4),
@@ -175,47 +176,58 @@ TABLE = [("across", "across", "g"), ("n", "automata", "d"), ("steps", "steps", "
          ("seconds", "wall (s)", ".1f")]
 
 
-def compression_flow_study(overrides=None, out=None, progress=True, quiet=None):
+class CompressionFlowStudy(Study):
     """``clusterdyn study mca-compression-flow``: the runs, a table, PNG and CSV (module docstring)."""
-    quiet = (not progress) if quiet is None else quiet
-    v, _ = parse_params(PARAMS, overrides, study="mca-compression-flow")
-    folder = out_folder(out, "mca-compression-flow", v["material"])
-    stream = None if quiet else sys.stdout
-    t0 = time.perf_counter()
-    runs = []
-    for a in v["across"]:
-        r = compression_flow(int(a), v["material"], v["strain"], v["transits"], v["damping"], v["remesh_strain"],
-                             v["D0"], stream=stream)
-        runs.append(r)
-    rows = [{k: r[k] for k in COLUMNS} for r in runs]
-    write_csv(folder / "compression_flow_summary.csv", rows, COLUMNS)
-    curve_rows = []
-    for r in runs:
-        for k in range(len(r["e_true"])):
-            row = r["rows"][k]
-            curve_rows.append({"across": r["across"], "step": row["step"], "e_true": r["e_true"][k],
-                               "stress_MPa": r["stress"][k] / units.GPa * 1e3,
-                               "curve_MPa": r["target"][k] / units.GPa * 1e3, "e_p": r["e_p"][k],
-                               "volume_change": r["volume_change"][k],
-                               "volume_change_all_cells": r["volume_change_cells"][k],
-                               "ledger_residual_J": row["residual"] / units.J,
-                               "plastic_work_J": row["plastic"] / units.J, "p_xy_rel": row["p_xy"] / r["p_scale"]})
-    write_csv(folder / "compression_flow.csv", curve_rows)
-    png = plot_compression(runs, folder / "compression_flow.png")
-    led = [{"across": r["across"], **{k: r["ledger"][k] / units.J for k in r["ledger"]}} for r in runs]
-    write_csv(folder / "compression_flow_ledger.csv", led)
-    text = format_table(rows, TABLE, title="MCA cylinder between frictionless platens (true stress vs the "
-                        "Johnson-Cook curve)")
-    if stream:
-        print(text, file=stream)
-    (folder / "compression_flow.md").write_text(markdown_table(rows, TABLE) + "\n")
-    res = {"study": "mca-compression-flow", "material": v["material"], "rows": rows,
-           "aims": {"stress": AIM_STRESS, "volume": AIM_VOLUME, "ledger": AIM_LEDGER},
-           "files": [str(folder / f) for f in ("compression_flow.csv", "compression_flow_summary.csv",
-                                               "compression_flow_ledger.csv", "compression_flow.md")] + [str(png)],
-           "wall_time_s": time.perf_counter() - t0}
-    write_json(folder / "result.json", res)
-    return res
+
+    name = "mca-compression-flow"
+    summary = ("MCA large strain: a Johnson-Cook cylinder between frictionless platens to 60% strain against the "
+               "input curve")
+    params = PARAMS
+    json_name = "result.json"
+
+    def tag(self, run):
+        return run.v["material"]
+
+    def plan(self, run):
+        return [int(a) for a in run.v["across"]]
+
+    def collect(self, run, plan):
+        v = run.v
+        stream = None if run.quiet else sys.stdout
+        return [compression_flow(a, v["material"], v["strain"], v["transits"], v["damping"], v["remesh_strain"],
+                                 v["D0"], stream=stream) for a in plan]
+
+    def report(self, run, runs):
+        folder = run.folder
+        rows = [{k: r[k] for k in COLUMNS} for r in runs]
+        write_csv(folder / "compression_flow_summary.csv", rows, COLUMNS)
+        curve_rows = []
+        for r in runs:
+            for k in range(len(r["e_true"])):
+                row = r["rows"][k]
+                curve_rows.append({"across": r["across"], "step": row["step"], "e_true": r["e_true"][k],
+                                   "stress_MPa": r["stress"][k] / units.GPa * 1e3,
+                                   "curve_MPa": r["target"][k] / units.GPa * 1e3, "e_p": r["e_p"][k],
+                                   "volume_change": r["volume_change"][k],
+                                   "volume_change_all_cells": r["volume_change_cells"][k],
+                                   "ledger_residual_J": row["residual"] / units.J,
+                                   "plastic_work_J": row["plastic"] / units.J, "p_xy_rel": row["p_xy"] / r["p_scale"]})
+        write_csv(folder / "compression_flow.csv", curve_rows)
+        png = plot_compression(runs, folder / "compression_flow.png")
+        led = [{"across": r["across"], **{k: r["ledger"][k] / units.J for k in r["ledger"]}} for r in runs]
+        write_csv(folder / "compression_flow_ledger.csv", led)
+        text = format_table(rows, TABLE, title="MCA cylinder between frictionless platens (true stress vs the "
+                            "Johnson-Cook curve)")
+        (folder / "compression_flow.md").write_text(markdown_table(rows, TABLE) + "\n")
+        files = [folder / f for f in ("compression_flow.csv", "compression_flow_summary.csv",
+                                      "compression_flow_ledger.csv", "compression_flow.md")] + [png]
+        res = {"study": "mca-compression-flow", "material": run.v["material"], "rows": rows,
+               "aims": {"stress": AIM_STRESS, "volume": AIM_VOLUME, "ledger": AIM_LEDGER},
+               "files": [str(f) for f in files]}
+        return Report(res, [text], files)
+
+
+compression_flow_study = register_study(CompressionFlowStudy())
 
 
 def plot_compression(runs, path):
