@@ -1,5 +1,5 @@
 """MCA studies: the packing-independent elasticity table, its Cluster Dynamics contrast, the
-degrading unload-reload cycle (and helpers the tests reuse).
+degrading unload-reload cycle.
 
     clusterdyn study mca-elasticity [--set size=L] [--out DIR]
     clusterdyn study mca-degrading [--set steps=N] [--out DIR]
@@ -14,7 +14,9 @@ load / unload / reload cycle of concrete and writes the curve (CSV, PNG) with
 the fitted initial and unloading moduli.
 
 The measurements are analysis: the MCA static tests are
-:mod:`clusterdyn.analysis.mca_elastic`, the CD contrast :func:`clusterdyn.analysis.elastic.cd_elastic_constants`.
+:mod:`clusterdyn.analysis.mca_elastic`, the CD contrast
+:func:`clusterdyn.analysis.elastic.cd_elastic_constants`; the cycle is
+:func:`clusterdyn.scenes.mca_material_point.degrading_cycle`.
 """
 
 import csv
@@ -22,12 +24,11 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from .. import units
 from ..analysis.elastic import cd_elastic_constants
 from ..analysis.mca_elastic import elastic_case, relative_errors
 from ..scenes.base import Param
+from ..scenes.mca_material_point import degrading_cycle
 from .base import Report, Study, register_study
 
 PACKINGS = ("fcc", "hcp", "sc", "random")
@@ -108,122 +109,6 @@ def cd_contrast_table(material="Al", r0=5 * units.um, directions=((1, 0, 0), (1,
                     w.writerow([r["direction"], kind] + [src[k] if k.startswith("nu") else src[k] / g
                                                          for k in CD_KEYS])
     return rows, text
-
-
-# -- degrading response: load / unload / reload ---------------------------------------------
-
-def load_unload_reload(s):
-    """Load fraction s in [0, 1] -> strain / strain_max: load, unload to zero strain, reload."""
-    if s < 0.4:
-        return s / 0.4
-    if s < 0.6:
-        return 1 - (s - 0.4) / 0.2
-    return (s - 0.6) / 0.4
-
-
-#: load-fraction windows of the slope fits (away from the turning points)
-FIT_WINDOWS = {"initial": (0.04, 0.22), "unloading": (0.43, 0.57), "reloading": (0.65, 0.95)}
-
-
-def degrading_cycle(material="concrete", size=(16, 5, 5), steps=6000, peak=0.95, damping=0.1,
-                    out=None, stream=sys.stdout):
-    """Load / unload / reload cycle of a degrading material (bar in tension, fcc, d = 1 A).
-
-    The grips follow :func:`load_unload_reload` to ``strain_max = peak sigma_t / E`` (load over
-    the first 40% of the steps, unload to zero strain over 20%, reload over 40%).
-    Slopes are fitted on the windows :data:`FIT_WINDOWS`; ``D_mean`` is the mean
-    damage of the linked pairs in the middle half of the bar at the end.
-    Writes ``degrading_cycle.csv`` and ``degrading_cycle.png`` in ``out``.
-
-    Returns
-    -------
-    dict with ``strain``, ``stress`` (eV/Angstrom^3), ``s`` (load fraction), the
-    fitted ``E_initial``, ``E_unloading``, ``E_reloading`` (eV/Angstrom^3), ``peak_stress``,
-    ``stress_at_zero_strain`` (end of unloading), ``D_mean`` and the material.
-    """
-    from ..materials import get_material
-    from ..scenes.mca_experiments import uniaxial
-
-    mat = get_material(material)
-    em = peak * mat.sigma_t / mat.E
-    t0 = time.perf_counter()
-    r = uniaxial(mat, "tension", size=size, strain_max=em, steps=steps, path=load_unload_reload, damping=damping)
-    e, sg = r["strain"], r["stress"]
-    s = r["time"] / (steps * r["dyn"].dt)
-    fits = {}
-    for name, (a, b) in FIT_WINDOWS.items():
-        w = (s >= a) & (s <= b)
-        fits[name] = np.polyfit(e[w], sg[w], 1)
-    st = r["dyn"].state
-    atoms = r["atoms"]
-    i_p, j_p = st.pair_rows(atoms)[:2]
-    x = atoms.positions[:, 0]
-    lo, hi = np.percentile(x, 25), np.percentile(x, 75)
-    gauge = (st.linked_p == 1) & (x[i_p] > lo) & (x[i_p] < hi) & (x[j_p] > lo) & (x[j_p] < hi)
-    D_mean = float(st.D_p[gauge].mean())
-    k0 = int(np.argmin(np.abs(s - 0.6)))
-    res = {"material": mat, "strain": e, "stress": sg, "s": s, "strain_max": em,
-           "E_initial": fits["initial"][0], "E_unloading": fits["unloading"][0],
-           "E_reloading": fits["reloading"][0], "fits": fits, "peak_stress": sg.max(),
-           "stress_at_zero_strain": sg[k0], "D_mean": D_mean, "seconds": time.perf_counter() - t0,
-           "size": size, "steps": steps}
-    g = units.GPa
-    lines = [f"{mat.name}: E = {mat.E / g:.2f} GPa, sigma_t = {mat.sigma_t / units.MPa:.3g} MPa; bar "
-             f"{size[0]}x{size[1]}x{size[2]} d fcc, {steps} steps, strain_max = {em:.3g} "
-             f"({peak:g} sigma_t/E), damping {damping:g}",
-             f"initial modulus    {res['E_initial'] / g:8.3f} GPa  = {res['E_initial'] / mat.E:.3f} E",
-             f"unloading modulus  {res['E_unloading'] / g:8.3f} GPa  = {res['E_unloading'] / mat.E:.3f} E",
-             f"reloading modulus  {res['E_reloading'] / g:8.3f} GPa  = {res['E_reloading'] / mat.E:.3f} E",
-             f"peak stress {res['peak_stress'] / mat.sigma_t:.3f} sigma_t; at zero strain after unloading "
-             f"{res['stress_at_zero_strain'] / mat.sigma_t:+.3f} sigma_t; mean damage of gauge pairs "
-             f"D = {D_mean:.3f} (1 - D = {1 - D_mean:.3f}); {res['seconds']:.1f} s"]
-    if stream is not None:
-        print("\n".join(lines), file=stream)
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        phase = np.where(s < 0.4, "load", np.where(s < 0.6, "unload", "reload"))
-        with open(out / "degrading_cycle.csv", "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["load_fraction", "strain", "stress_GPa", "stress_over_sigma_t", "phase"])
-            for row in zip(s, e, sg / g, sg / mat.sigma_t, phase):
-                w.writerow(row)
-        (out / "degrading_cycle.txt").write_text("\n".join(lines) + "\n")
-        res["png"] = _plot_cycle(res, out / "degrading_cycle.png")
-    return res
-
-
-def _plot_cycle(res, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    mat, e, sg, s = res["material"], res["strain"], res["stress"], res["s"]
-    st = mat.sigma_t
-    g = units.GPa
-    fig, ax = plt.subplots(figsize=(6.0, 4.2))
-    for (a, b), lab, c in (((0, 0.4), "load", "C0"), ((0.4, 0.6), "unload", "C3"), ((0.6, 1.01), "reload", "C2")):
-        w = (s >= a - 1e-9) & (s <= b)
-        ax.plot(e[w] * 1e4, sg[w] / st, color=c, lw=1.6, label=lab)
-    x = np.linspace(0.0, res["strain_max"], 2)
-    for name, ls in (("initial", "--"), ("unloading", ":")):
-        m, c0 = res["fits"][name]
-        E = res[f"E_{name}"]
-        ax.plot(x * 1e4, (m * x + c0) / st, "k" + ls, lw=1.0,
-                label=f"{name} fit: {E / g:.1f} GPa = {E / mat.E:.2f} E")
-    # damage onset in uniaxial tension: Drucker-Prager sigma_eq = beta sigma = sigma_d
-    onset = mat.extra.get("sigma_d", 0.7 * mat.sigma_c) * mat.sigma_t / mat.sigma_c
-    ax.axhline(onset / st, color="0.6", lw=0.8, ls="-.", label="damage onset (sigma_d / beta)")
-    ax.set_xlabel("strain (1e-4)")
-    ax.set_ylabel("stress / sigma_t")
-    ax.set_title(f"{mat.name}: load, unload to zero strain, reload")
-    ax.set_xlim(left=0)
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
 
 
 def _degrading_materials():

@@ -40,6 +40,7 @@ import numpy as np
 from .. import units
 from ..build import fcc_packing
 from ..calculators import ClusterDynamics
+from ..analysis.energy_balance import EnergyBalance
 from ..errors import InputError, InstabilityError
 from ..md import DampedVerlet, stability_limit
 from ..md.damped import TIMESTEP_FACTOR
@@ -72,39 +73,6 @@ COLUMNS = [("u", "u km/s", ".3g"), ("dt_default", "dt default", ".4f"), ("dt_lim
            ("err_default", "E err default", ".2e"), ("default_ok", "default ok", ""),
            ("min_r", "min r/r0", ".3f"), ("dt_check", "check predicts", ".4f"),
            ("dt_rest", "2/w_max rest", ".4f"), ("stopped_by", "first failure", ""), ("n_runs", "runs", "d")]
-
-
-class EnergyBalance:
-    """Observer: energy error ``E - E(0) - W`` after every step (attach with interval 1).
-
-    ``W`` is the work the pistons have done on the sample since the first
-    call (:attr:`clusterdyn.md.Piston.work`, the trapezoid integral of
-    ``-force . U`` over the steps); constant-velocity pistons keep their own
-    kinetic energy, so ``E - E(0) - W`` is the integrator's error.
-    """
-
-    def __init__(self, dyn, atoms, pistons):
-        self.dyn, self.atoms, self.pistons = dyn, atoms, pistons
-        self.E0 = None
-        self.W0 = 0.0
-        self.errors = []
-        self.min_r = math.inf
-
-    @property
-    def W(self):
-        """Work of the pistons since the first call, eV."""
-        return sum(p.work for p in self.pistons) - self.W0
-
-    def __call__(self):
-        dyn = self.dyn
-        E = dyn.get_total_energy()
-        W = sum(p.work for p in self.pistons)
-        if self.E0 is None:
-            self.E0, self.W0 = E, W
-        self.errors.append(E - self.E0 - (W - self.W0))
-        st = dyn.calc.last_stats
-        if st is not None:
-            self.min_r = min(self.min_r, st["min_r_over_r0"])
 
 
 def _run(material, u, dt, v, rest_duration=None):

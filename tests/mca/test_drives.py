@@ -14,7 +14,7 @@ from clusterdyn.mca.state import ATOM_ARRAYS, PAIR_ARRAYS
 from clusterdyn.md import Piston, Traction
 from clusterdyn.scenes.mca_experiments import build_uniaxial
 from clusterdyn.analysis.mca_elastic import elastic_material
-from clusterdyn.studies.mca import load_unload_reload
+from clusterdyn.scenes.mca_material_point import load_unload_reload
 
 ALUMINA = get_material("alumina")
 

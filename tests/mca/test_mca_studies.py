@@ -10,7 +10,7 @@ import pytest
 from clusterdyn import units
 from clusterdyn.materials import get_material
 from clusterdyn.analysis.elastic import cd_elastic_constants, cubic_stiffness, rotate_stiffness, uniaxial_moduli
-from clusterdyn.studies.mca import degrading_cycle
+from clusterdyn.scenes.mca_material_point import degrading_cycle
 
 
 def test_cd_contrast_100_cauchy_poisson_ratio_and_bulk_modulus():
