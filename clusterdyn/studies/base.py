@@ -42,10 +42,18 @@ def register_study(study):
 
 
 def all_studies():
-    """Every registered study (imports the study modules on first use)."""
+    """Every registered study (imports the study modules on first use), in the order of
+    :data:`STUDY_MODULES` whatever the order the modules were imported in (studies registered
+    from elsewhere come last)."""
     for m in STUDY_MODULES:
         importlib.import_module(f"{__package__}.{m}")
-    return STUDIES
+    modules = [f"{__package__}.{m}" for m in STUDY_MODULES]
+    order = list(STUDIES)
+
+    def rank(name):
+        mod = type(STUDIES[name]).__module__
+        return (modules.index(mod) if mod in modules else len(modules), order.index(name))
+    return {name: STUDIES[name] for name in sorted(STUDIES, key=rank)}
 
 
 def get_study(name):
