@@ -76,7 +76,8 @@ class Report:
 
 class StudyRun:
     """One call of a study: its parsed values ``v``, the forwarded scene overrides ``fwd``, the
-    folder, and the cache its scene runs go through."""
+    folder, and the cache its scene runs go through.  A study's steps keep what they share on it
+    (``prepare`` sets what ``plan``, ``collect`` and ``report`` read, e.g. the parsed scene values)."""
 
     def __init__(self, study, v, fwd, progress, quiet):
         self.study, self.v, self.fwd = study, v, fwd
