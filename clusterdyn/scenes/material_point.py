@@ -54,33 +54,55 @@ BOUNDARIES = ("bonded", "repulsive")
 class PointTest:
     """The settings of one material-point test (ASE units unless a unit is named).
 
-    material : str or Material -- a material with a cold curve.
-    r0 : cluster size, Angstrom (stresses do not depend on it: times scale with r0/c0).
-    size : cube edge, in r0 (a single crystal: rounded to whole [100] cells of sqrt(2) r0).
-    sample : "polycrystal" or "single".
-    grain_size : mean grain diameter (equal-volume sphere), in r0.
-    porosity : target porosity (``d_min`` chosen by bisection); None: use ``d_min``.
-    d_min : boundary distance in r0 when ``porosity`` is None.
-    rc : cutoff, multiple of r0.
-    boundaries : "bonded" or "repulsive" (set-up bonds inside grains only, ``attraction="initial"``:
-        pairs across a grain boundary never attract).
-    strains : increasing compressive strains in (0, 0.5) at which the curve is read; the ramp runs
-        to the last one and the hold is there.
-    rate : strain rate of the ramp, per r0/c0.
-    hold, average, dt, record_every : in r0/c0: hold at the final strain, averaging window at the
-        end of the hold, time step, stress sampling interval.
-    J : pair damping Gamma = c0/(J r0) during the test (None: off).
-    noise : rms random velocity added after the quench (ASE velocity).
-    seed : grains, orientations and noise.
-    relax_cycles : quench cycles of 100 damped steps (polycrystal only; 0 = none).
-    axis : compression axis (0, 1, 2).
-    window : strain window around each strain of ``strains`` (one-sided at the last): the ramp's
-        stress is read there from a straight-line fit of each component against the strain.
-    law : dict or BoundaryLaw, optional -- the boundary pair law (:mod:`clusterdyn.md.boundary`; a
-        dict in display units: sigma_t and tau_c in GPa, G_c in J/m^2, mu, select); replaces
-        ``boundaries``.
-    tension : stretch instead of compress (uniaxial strain).
-    lateral_free : uniaxial stress: after every reading the lateral cell axes are rescaled by
+    Attributes
+    ----------
+    material : str or Material
+        A material with a cold curve.
+    r0 : float
+        Cluster size, Angstrom (stresses do not depend on it: times scale with r0/c0).
+    size : float
+        Cube edge, in r0 (a single crystal: rounded to whole [100] cells of sqrt(2) r0).
+    sample : str
+        "polycrystal" or "single".
+    grain_size : float
+        Mean grain diameter (equal-volume sphere), in r0.
+    porosity : float or None
+        Target porosity (``d_min`` chosen by bisection); None: use ``d_min``.
+    d_min : float
+        Boundary distance in r0 when ``porosity`` is None.
+    rc : float
+        Cutoff, multiple of r0.
+    boundaries : str
+        "bonded" or "repulsive" (set-up bonds inside grains only, ``attraction="initial"``: pairs
+        across a grain boundary never attract).
+    strains : tuple of float
+        Increasing compressive strains in (0, 0.5) at which the curve is read; the ramp runs to the
+        last one and the hold is there.
+    rate : float
+        Strain rate of the ramp, per r0/c0.
+    hold, average, dt, record_every : float
+        In r0/c0: hold at the final strain, averaging window at the end of the hold, time step,
+        stress sampling interval.
+    J : float or None
+        Pair damping Gamma = c0/(J r0) during the test (None: off).
+    noise : float
+        rms random velocity added after the quench (ASE velocity).
+    seed : int
+        Grains, orientations and noise.
+    relax_cycles : int
+        Quench cycles of 100 damped steps (polycrystal only; 0 = none).
+    axis : int
+        Compression axis (0, 1, 2).
+    window : float
+        Strain window around each strain of ``strains`` (one-sided at the last): the ramp's stress
+        is read there from a straight-line fit of each component against the strain.
+    law : dict or BoundaryLaw or None
+        The boundary pair law (:mod:`clusterdyn.md.boundary`; a dict in display units: sigma_t and
+        tau_c in GPa, G_c in J/m^2, mu, select); replaces ``boundaries``.
+    tension : bool
+        Stretch instead of compress (uniaxial strain).
+    lateral_free : bool
+        Uniaxial stress: after every reading the lateral cell axes are rescaled by
         ``1 - sigma_lateral/(10 K0)`` toward zero lateral stress.
     """
 
