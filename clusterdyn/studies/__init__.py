@@ -29,65 +29,29 @@ calibrate             tunes the boundary pair law (docs/theory.md 1.11) to targe
 dusting               numerical dusting of a smooth free surface against u, rc, damping
                       and r0 (the CD paper's figs. 18-20)
 ====================  ======================================================================
+
+Each is a :class:`~clusterdyn.studies.base.Study` registered with
+:func:`~clusterdyn.studies.base.register_study`; :mod:`clusterdyn.studies.base` describes the
+lifecycle they share (parse, plan, collect, report, finish).
 """
 
-import importlib
-
-from ..errors import InputError
-
-#: study name -> ("module:function:parameter list", summary)
-STUDIES = {
-    "hugoniot": ("hugoniot:hugoniot_study:PARAMS", "piston-speed sweep of the shock scene: D-u and P-rho "
-                 "against the experimental Hugoniot (also forwards the shock scene's parameters)"),
-    "convergence": ("convergence:convergence_study:PARAMS", "error of D against experiment and the finest run "
-                    "versus wall time, over size, time step, cutoff, noise and r0"),
-    "stability": ("stability:stability_study:PARAMS", "the measured time-step limit (bounded energy error) "
-                  "against u"),
-    "mca-elasticity": ("mca:elasticity_study:ELASTICITY_PARAMS", "MCA's packing-independent E, nu, K, G on "
-                       "fcc, hcp, sc and random packings, and the Cluster Dynamics contrast"),
-    "mca-degrading": ("mca:degrading_study:DEGRADING_PARAMS", "a load / unload / reload cycle of a degrading "
-                      "MCA material"),
-    "mca-compression-flow": ("mca_flow:compression_flow_study:PARAMS", "MCA large strain: a Johnson-Cook "
-                             "cylinder between frictionless platens to 60% strain against the input curve"),
-    "mca-taylor": ("mca_taylor:taylor_study:PARAMS", "every room-temperature 6061-T6 Taylor test with the MCA "
-                   "rod (Johnson-Cook, large strain): Lf/L0, Df/D0 against the tests, error against wall time"),
-    "flow-stress": ("flow_stress:flow_stress_study:PARAMS", "flow stress of a CD polycrystal (material-point "
-                    "test) against grain size, porosity, rc and boundary cohesion; the packing closest to a target"),
-    "calibrate": ("calibrate:calibrate_study:PARAMS", "tune the boundary pair law to target strengths (flow "
-                  "stress, spall strength): unconfined, tension and confined material-point tests; writes a "
-                  "packing file"),
-    "dusting": ("dusting:dusting_study:PARAMS", "dispersed clusters of a shocked smooth free surface against u, "
-                "rc, damping and r0 (CD paper figs. 18-20)"),
-}
+from .base import STUDIES, Study, all_studies, get_study, register_study
 
 
 def study_names():
-    return list(STUDIES)
-
-
-def _entry(name):
-    if name not in STUDIES:
-        raise InputError("study", name, "one of " + ", ".join(STUDIES))
-    mod, fn, params = STUDIES[name][0].split(":")
-    return importlib.import_module(f"{__name__}.{mod}"), fn, params
-
-
-def get_study(name):
-    """The study function registered as ``name`` (see :data:`STUDIES`)."""
-    mod, fn, _ = _entry(name)
-    return getattr(mod, fn)
+    """The registered studies' names, in the order ``clusterdyn study`` lists them."""
+    return list(all_studies())
 
 
 def study_params(name):
     """The study's own parameters (list of :class:`~clusterdyn.scenes.base.Param`)."""
-    mod, _, params = _entry(name)
-    return list(getattr(mod, params))
+    return list(get_study(name).params)
 
 
 def study_summary(name):
     """One line on what the study does."""
-    _entry(name)
-    return STUDIES[name][1]
+    return get_study(name).summary
 
 
-__all__ = ["STUDIES", "get_study", "study_names", "study_params", "study_summary"]
+__all__ = ["STUDIES", "Study", "all_studies", "get_study", "register_study", "study_names", "study_params",
+           "study_summary"]

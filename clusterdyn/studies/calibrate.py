@@ -4,7 +4,7 @@ The law (docs/theory.md 1.11) adds a tensile strength, a fracture energy and a s
 a CD polycrystal's pairs.  This study **tunes** them: the presets it produces are calibrated to
 targets, not predicted.  For each candidate packing (the law on the pairs across grain boundaries
 or on every pair, ``selects``, times the tensile strengths ``sigma_ts``) it runs the material-point
-tests of :func:`clusterdyn.studies.flow_stress.material_point` on a periodic cube:
+tests of :func:`clusterdyn.scenes.material_point.material_point` on a periodic cube:
 
 - ``unconfined``: uniaxial stress (lateral axes rescaled toward zero stress), compressed to 8%
   and held: **flow_stress** = the relaxed von Mises intensity (a metal's flow stress is measured
@@ -27,7 +27,6 @@ extended study only runs what is missing.  Outputs: ``calibrate.csv``, ``calibra
 """
 
 import math
-import time
 
 import numpy as np
 
@@ -39,9 +38,9 @@ from ..potentials import ClusterPotential
 from ..scenes.base import Param
 from ..scenes.common import matplotlib_agg
 from ..scenes.shock import CD_MATERIALS
-from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, run_scene,
-                     write_csv, write_json)
-from .flow_stress import POINT
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, run_scene, write_csv, write_json
+from .point import POINT
 
 TARGETS = ("flow_stress", "spall_strength", "confined_flow")
 
@@ -208,83 +207,104 @@ COLUMNS = [("candidate", "candidate", ""), ("select", "law on", ""), ("sigma_t",
            ("objective", "objective", ".3g"), ("wall_s", "wall s", ".0f")]
 
 
-def calibrate_study(overrides=None, out=None, progress=True, quiet=None):
-    """Run the calibration (module docstring); returns a JSON-ready dict (``rows``, ``best``,
-    ``best_packing``, ``targets``, ``files``)."""
-    t0 = time.perf_counter()
-    quiet = (not progress) if quiet is None else quiet
-    v, _ = parse_params(PARAMS, overrides, study="calibrate")
-    mat = get_material(v["material"])
-    targets = {k: v[k] / units.GPa for k in TARGETS if v[k] is not None}
-    spec = packing_spec(v["packing"]) if v["packing"] is not None else None
-    if spec is None and not targets:
-        raise InputError("flow_stress", None, "at least one target (flow_stress, spall_strength, confined_flow) "
-                         "or a packing to measure")
-    tests = (["unconfined"] if v["unconfined"] else []) + ["tension"] + (["confined"] if v["confined"] else [])
-    if "flow_stress" in targets and not v["unconfined"]:
-        raise InputError("unconfined", False, "true with a flow_stress target (the unconfined test measures it)")
-    if "confined_flow" in targets and not v["confined"]:
-        raise InputError("confined", False, "true with a confined_flow target")
-    folder = out_folder(out, "calibrate", v["material"])
-    cache = folder / "runs"
-    cands = [] if spec is not None else _candidates(v, mat)
-    n_runs = v["seeds"] * len(tests) * (len(cands) + (1 if v["reference"] or spec is not None else 0))
-    bar = progress_bar(n_runs, "calibrate", progress)
-    rows = []
-    if spec is not None:
-        rows.append(_measure(v, f"packing {spec.get('name', '')}", spec.get("law"), cache, tests, bar, spec=spec))
-    elif v["reference"]:
-        rows.append(_measure(v, "no law (bonded)", None, cache, tests, bar))
-    for select, st in cands:
-        rows.append(_measure(v, f"{select} {st:g}", _law(v, select, st, mat), cache, tests, bar))
-    if spec is None and v["refine"] and targets:
-        for select in dict.fromkeys(s for s, _ in cands):
-            st = _interpolate([r for r in rows if r["select"] == select], targets)
-            if st is not None and all(abs(st - r["sigma_t"]) > 1e-3 * st for r in rows if r["select"] == select):
-                rows.append(_measure(v, f"{select} {st:.3g} (interpolated)", _law(v, select, round(st, 3), mat),
-                                     cache, tests, None))
-    if bar is not None:
-        bar.close()
-    for r in rows:
-        r["objective"] = _objective(r, targets) if targets else float("nan")
-    lawful = [r for r in rows if r["sigma_t"] is not None or spec is not None]
-    best = min(lawful, key=lambda r: r["objective"]) if targets and lawful else (rows[0] if rows else None)
-    lines = [format_table(rows, COLUMNS, f"calibration of the boundary law, {v['material']}: cube {v['size']:g} r0, "
-                          f"grains {v['grain_size']:g} r0, porosity {v['porosity']:g} as built, "
-                          f"{v['seeds']} seed(s); targets " + (", ".join(f"{k} {t:g} GPa" for k, t in targets.items())
-                                                                or "none"))]
-    best_packing = None
-    if best is not None and spec is None and best["sigma_t"] is not None:
-        law = {"sigma_t": best["sigma_t"], "ductility": v["ductility"], "tau_c": v["tau_c"] / units.GPa,
-               "mu": v["mu"], "select": best["select"]}
-        best_packing = {"grain_size": v["grain_size"], "porosity": v["porosity"], "rc": v["rc"],
-                        "boundaries": "law", "law": law, "material": v["material"],
-                        "description": f"calibrated (tuned) by clusterdyn study calibrate to {targets} "
-                                       f"(G_c {best['G_c']:.4g} J/m^2 at r0 = {v['r0'] / units.um:g} um; "
-                                       "ductility kept at other r0)",
-                        "targets": targets, "calibrated": True,
-                        "achieved": {k: best[k] for k in ("flow_stress", "spall_strength", "confined_flow",
-                                                          "E_young", "M_long")}}
-        write_json(folder / "best_packing.json", best_packing)
-        for k, t in targets.items():
-            lines.append(f"best: {best['candidate']}: {k} {best[k]:.3g} GPa against {t:g} "
-                         f"({100 * (best[k] / t - 1):+.0f}%)")
-    md = markdown_table(rows, COLUMNS)
-    files = [write_csv(folder / "calibrate.csv", rows)]
-    (folder / "calibrate.md").write_text(md + "\n")
-    files.append(folder / "calibrate.md")
-    if v["plots"] and rows:
-        files.append(_plot(folder / "calibrate.png", rows, targets, v))
-    if best_packing is not None:
-        files.append(folder / "best_packing.json")
-    result = {"study": "calibrate", "material": v["material"], "targets": targets, "rows": rows, "best": best,
-              "best_packing": best_packing, "markdown": md, "wall_time_s": time.perf_counter() - t0}
-    files.append(write_json(folder / "calibrate.json", result))
-    result["files"] = [str(f) for f in files]
-    lines.append("wrote " + ", ".join(str(f) for f in files))
-    if not quiet:
-        print("\n\n".join(lines))
-    return result
+def _best_packing(v, best, targets):
+    """The packing file's content for the best candidate."""
+    law = {"sigma_t": best["sigma_t"], "ductility": v["ductility"], "tau_c": v["tau_c"] / units.GPa,
+           "mu": v["mu"], "select": best["select"]}
+    return {"grain_size": v["grain_size"], "porosity": v["porosity"], "rc": v["rc"],
+            "boundaries": "law", "law": law, "material": v["material"],
+            "description": f"calibrated (tuned) by clusterdyn study calibrate to {targets} "
+                           f"(G_c {best['G_c']:.4g} J/m^2 at r0 = {v['r0'] / units.um:g} um; "
+                           "ductility kept at other r0)",
+            "targets": targets, "calibrated": True,
+            "achieved": {k: best[k] for k in ("flow_stress", "spall_strength", "confined_flow",
+                                              "E_young", "M_long")}}
+
+
+class CalibrateStudy(Study):
+    """Tunes the boundary pair law to target strengths (module docstring).  Its result holds
+    ``rows``, ``best``, ``best_packing``, ``targets``, ``files``."""
+
+    name = "calibrate"
+    summary = ("tune the boundary pair law to target strengths (flow stress, spall strength): unconfined, "
+               "tension and confined material-point tests; writes a packing file")
+    params = PARAMS
+    json_name = "calibrate.json"
+
+    def tag(self, run):
+        return run.v["material"]
+
+    def prepare(self, run):
+        v = run.v
+        run.mat = get_material(v["material"])
+        run.targets = {k: v[k] / units.GPa for k in TARGETS if v[k] is not None}
+        run.spec = packing_spec(v["packing"]) if v["packing"] is not None else None
+        if run.spec is None and not run.targets:
+            raise InputError("flow_stress", None, "at least one target (flow_stress, spall_strength, confined_flow) "
+                             "or a packing to measure")
+        run.tests = (["unconfined"] if v["unconfined"] else []) + ["tension"] + (["confined"] if v["confined"] else [])
+        if "flow_stress" in run.targets and not v["unconfined"]:
+            raise InputError("unconfined", False, "true with a flow_stress target (the unconfined test measures it)")
+        if "confined_flow" in run.targets and not v["confined"]:
+            raise InputError("confined", False, "true with a confined_flow target")
+
+    def plan(self, run):
+        """The candidates: (select, sigma_t) of the grid (none when a packing is measured)."""
+        return [] if run.spec is not None else _candidates(run.v, run.mat)
+
+    def collect(self, run, cands):
+        """The rows: the packing (or the reference), every candidate, then the interpolated ones."""
+        v, spec, tests, cache, mat = run.v, run.spec, run.tests, run.cache, run.mat
+        n_runs = v["seeds"] * len(tests) * (len(cands) + (1 if v["reference"] or spec is not None else 0))
+        bar = run.bar(n_runs, "calibrate")
+        rows = []
+        if spec is not None:
+            rows.append(_measure(v, f"packing {spec.get('name', '')}", spec.get("law"), cache, tests, bar, spec=spec))
+        elif v["reference"]:
+            rows.append(_measure(v, "no law (bonded)", None, cache, tests, bar))
+        for select, st in cands:
+            rows.append(_measure(v, f"{select} {st:g}", _law(v, select, st, mat), cache, tests, bar))
+        if spec is None and v["refine"] and run.targets:
+            for select in dict.fromkeys(s for s, _ in cands):
+                st = _interpolate([r for r in rows if r["select"] == select], run.targets)
+                if st is not None and all(abs(st - r["sigma_t"]) > 1e-3 * st for r in rows if r["select"] == select):
+                    rows.append(_measure(v, f"{select} {st:.3g} (interpolated)", _law(v, select, round(st, 3), mat),
+                                         cache, tests, None))
+        if bar is not None:
+            bar.close()
+        return rows
+
+    def report(self, run, rows):
+        v, targets, spec, folder = run.v, run.targets, run.spec, run.folder
+        for r in rows:
+            r["objective"] = _objective(r, targets) if targets else float("nan")
+        lawful = [r for r in rows if r["sigma_t"] is not None or spec is not None]
+        best = min(lawful, key=lambda r: r["objective"]) if targets and lawful else (rows[0] if rows else None)
+        lines = [format_table(rows, COLUMNS, f"calibration of the boundary law, {v['material']}: cube {v['size']:g} r0, "
+                              f"grains {v['grain_size']:g} r0, porosity {v['porosity']:g} as built, "
+                              f"{v['seeds']} seed(s); targets " + (", ".join(f"{k} {t:g} GPa" for k, t in targets.items())
+                                                                    or "none"))]
+        best_packing = None
+        if best is not None and spec is None and best["sigma_t"] is not None:
+            best_packing = _best_packing(v, best, targets)
+            write_json(folder / "best_packing.json", best_packing)
+            for k, t in targets.items():
+                lines.append(f"best: {best['candidate']}: {k} {best[k]:.3g} GPa against {t:g} "
+                             f"({100 * (best[k] / t - 1):+.0f}%)")
+        md = markdown_table(rows, COLUMNS)
+        files = [write_csv(folder / "calibrate.csv", rows)]
+        (folder / "calibrate.md").write_text(md + "\n")
+        files.append(folder / "calibrate.md")
+        if v["plots"] and rows:
+            files.append(_plot(folder / "calibrate.png", rows, targets, v))
+        if best_packing is not None:
+            files.append(folder / "best_packing.json")
+        result = {"study": "calibrate", "material": v["material"], "targets": targets, "rows": rows, "best": best,
+                  "best_packing": best_packing, "markdown": md}
+        return Report(result, lines, files)
+
+
+calibrate_study = register_study(CalibrateStudy())
 
 
 def _plot(path, rows, targets, v):

@@ -1,5 +1,6 @@
 """Pieces shared by the studies: parameters (with lists), running scenes, tables, files."""
 
+import atexit
 import contextlib
 import csv
 import hashlib
@@ -111,6 +112,7 @@ def display_value(param, value):
 
 
 _HELD_FOLDERS = contextlib.ExitStack()   # the study folders this process holds (their locks go with it)
+atexit.register(_HELD_FOLDERS.close)   # released at exit, before the modules are torn down
 
 
 def out_folder(out, study, tag):

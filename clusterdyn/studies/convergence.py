@@ -22,17 +22,14 @@ the wall time and particle-steps.  Files in ``--out`` (default
 (error against wall time, Pareto front marked) and ``convergence.json``.
 """
 
-import math
-import time
-
 import numpy as np
 
 from .. import units
 from ..errors import InputError
 from ..scenes import get_scene
 from ..scenes.base import Param
-from .common import (ListParam, format_table, markdown_table, out_folder, pareto_front, parse_params, progress_bar,
-                     run_scene, shock_row, write_csv, write_json)
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, pareto_front, shock_row, write_csv
 
 
 class SizeListParam(Param):
@@ -88,82 +85,15 @@ COLUMNS = [("sweep", "sweep", ""), ("value", "value", ""), ("size", "size", ""),
            ("particle_steps", "p-steps", ".3g"), ("pareto", "Pareto", "")]
 
 
-def convergence_study(overrides=None, out=None, progress=True, quiet=None):
-    """Run the convergence study (see the module docstring); returns a JSON-ready dict."""
-    t_start = time.perf_counter()
-    quiet = (not progress) if quiet is None else quiet
-    v0 = {k: x for k, x in (overrides or {}).items()}
-    scene_name = v0.get("scene", "shock")
-    scene = get_scene(scene_name)
-    v, fwd = parse_params(PARAMS, overrides, forward=scene, study="convergence")
-    fwd = {k: x for k, x in fwd.items()}
-    fwd.setdefault("h5md", "false")
-    fwd.setdefault("checkpoint_every", "0")
-    base_vals = scene.parse(fwd)
-    defaults = {"size": v["base"], "dt_factor": base_vals["dt_factor"], "rc": base_vals["rc"],
-                "noise": base_vals["noise"] / units.m_s, "r0": base_vals["r0"] / units.um}
-    mat = base_vals["material"]
-    u = base_vals["u"] / units.km_s
-    folder = out_folder(out, "convergence", f"{mat}-{u:g}kms")
+def _key(s):
+    """A run's identity: the settings that change it."""
+    return (tuple(s["size"]), round(s["dt_factor"], 12), round(s["rc"], 12), round(s["noise"], 9),
+            round(s["r0"], 9))
 
-    plan = []      # (sweep, label, settings)
 
-    def add(sweep, label, **kw):
-        s = dict(defaults)
-        s.update(kw)
-        plan.append((sweep, label, s))
-
-    add("finest", "x".join(map(str, v["finest"])), size=v["finest"], dt_factor=v["finest_dt"])
-    for sz in v["ladder"] or ():
-        add("ladder", "x".join(map(str, sz)), size=sz)
-    for n in v["cross"] or ():
-        add("cross-section", f"{int(n)}x{int(n)}", size=(v["cross_length"], int(n), int(n)))
-    for L in v["lengths"] or ():
-        add("length", f"{int(L)}", size=(int(L), v["length_cross"], v["length_cross"]))
-    for f in v["dt_factors"] or ():
-        add("time step", f"{f:g}", dt_factor=f)
-    for rc in v["rcs"] or ():
-        add("cutoff", f"{rc:g}", rc=rc)
-    for nz in v["noises"] or ():
-        add("noise", f"{nz:g} m/s", noise=nz)
-    for r in v["r0s"] or ():
-        add("r0", f"{r:g} um", r0=r)
-
-    def key(s):
-        return (tuple(s["size"]), round(s["dt_factor"], 12), round(s["rc"], 12), round(s["noise"], 9),
-                round(s["r0"], 9))
-
-    done = {}
-    rows = []
-    todo = []
-    for sweep, label, s in plan:
-        if key(s) not in {key(x[2]) for x in todo}:
-            todo.append((sweep, label, s))
-    # cheapest first, the finest last: partial results come early
-    todo.sort(key=lambda x: np.prod(x[2]["size"]) / x[2]["dt_factor"])
-    bar = progress_bar(len(todo), f"convergence {mat} u={u:g}", progress)
-    for n, (sweep, label, s) in enumerate(todo):
-        ov = dict(fwd)
-        ov.update({"size": "x".join(map(str, s["size"])), "dt_factor": s["dt_factor"], "rc": s["rc"],
-                   "noise": s["noise"], "r0": s["r0"]})
-        if bar is not None:
-            bar.set_postfix_str(f"{sweep} {label}")
-        res, err, wall = run_scene(scene, ov, progress=progress, cache=v["cache"] or folder / "runs",
-                                   reuse=v["reuse"])
-        done[key(s)] = shock_row(res, err, wall)
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    finest = done[key(plan[0][2])]
-    D_f = finest.get("D", float("nan"))
-    for sweep, label, s in plan:
-        r = dict(done[key(s)])
-        r.update({"sweep": sweep, "value": label, "size": "x".join(map(str, s["size"])),
-                  "dt_factor": s["dt_factor"], "rc": s["rc"], "noise": s["noise"], "r0": s["r0"]})
-        r["err_finest"] = (r["D"] / D_f - 1.0) if r.get("D") is not None and np.isfinite(D_f) else None
-        rows.append(r)
-    # Pareto front over runs of the default model (rc, noise): the numerical choices
+def _pareto(rows, defaults):
+    """Pareto fronts (indices into ``rows``) of |error vs finest| and |error vs experiment| against wall
+    time, over the runs of the default model (rc, noise): the numerical choices."""
     numerical = [i for i, r in enumerate(rows) if r["rc"] == defaults["rc"] and r["noise"] == defaults["noise"]
                  and r.get("D") is not None and r["sweep"] != "finest"]
     seen, uniq = set(), []
@@ -178,37 +108,122 @@ def convergence_study(overrides=None, out=None, progress=True, quiet=None):
                                               [rows[i]["err_ref"] for i in uniq])]
     for i, r in enumerate(rows):
         r["pareto"] = ("F" if i in front_f else "") + ("E" if i in front_e else "")
-    text = [format_table(rows, COLUMNS,
-                         f"convergence of D for {mat} [{base_vals['direction']}] u = {u:g} km/s "
-                         f"(finest: {plan[0][1]} at dt factor {v['finest_dt']:g}, D = {D_f:.4f} km/s)")]
-    text.append("Pareto: F = on the front of |error vs finest| against wall time, E = of |error vs experiment|, "
-                "over the runs of the default model (rc, noise)")
-    r0rows = [r for r in rows if r["sweep"] == "r0" and r.get("D") is not None]
-    if len(r0rows) > 1:
-        Ds = np.array([r["D"] for r in r0rows])
-        dtxt = ", ".join(f"{d:.6f}" for d in Ds)
-        rtxt = ", ".join(f"{r['r0']:g}" for r in r0rows)
-        text.append(f"r0 at fixed geometry in cells: D = {dtxt} km/s for r0 = {rtxt} um: spread "
-                    f"{np.ptp(Ds) / Ds.mean():.2e} "
-                    "(scale-free: same trajectory in units of r0)")
-    lad = [r for r in rows if r["sweep"] in ("ladder", "finest") and r.get("wall_s")]
-    if lad:
-        w = [r["wall_s"] for r in lad]
-        text.append(f"resolution ladder: {len(lad)} samples, wall time {min(w):.2g}-{max(w):.3g} s "
-                    f"({max(w) / min(w):.0f}x)")
-    files = [write_csv(folder / "convergence.csv", rows)]
-    if v["plots"]:
-        files.append(_plot(folder / "convergence.png", rows, front_f, front_e, mat, u))
-    result = {"study": "convergence", "scene": scene_name, "material": mat, "u_km_s": u,
-              "finest": {"size": plan[0][1], "dt_factor": v["finest_dt"], "D": D_f},
-              "runs": rows, "pareto_finest": front_f, "pareto_experiment": front_e,
-              "markdown": markdown_table(rows, COLUMNS), "wall_time_s": time.perf_counter() - t_start}
-    files.append(write_json(folder / "convergence.json", result))
-    result["files"] = [str(f) for f in files]
-    text.append("wrote " + ", ".join(str(f) for f in files))
-    if not quiet:
-        print("\n\n".join(text))
-    return result
+    return front_f, front_e
+
+
+class ConvergenceStudy(Study):
+    """Error of a shock run against its cost (module docstring)."""
+
+    name = "convergence"
+    summary = ("error of D against experiment and the finest run versus wall time, over size, time step, cutoff, "
+               "noise and r0")
+    params = PARAMS
+    scene = "shock"
+    json_name = "convergence.json"
+
+    def prepare(self, run):
+        v = run.v
+        run.fwd = {k: x for k, x in run.fwd.items()}
+        run.fwd.setdefault("h5md", "false")
+        run.fwd.setdefault("checkpoint_every", "0")
+        run.base = base = get_scene(v["scene"]).parse(run.fwd)
+        run.defaults = {"size": v["base"], "dt_factor": base["dt_factor"], "rc": base["rc"],
+                        "noise": base["noise"] / units.m_s, "r0": base["r0"] / units.um}
+        run.mat, run.u = base["material"], base["u"] / units.km_s
+
+    def tag(self, run):
+        return f"{run.mat}-{run.u:g}kms"
+
+    def plan(self, run):
+        """(sweep, label, settings) of every run, the finest first."""
+        v, plan = run.v, []
+
+        def add(sweep, label, **kw):
+            s = dict(run.defaults)
+            s.update(kw)
+            plan.append((sweep, label, s))
+
+        add("finest", "x".join(map(str, v["finest"])), size=v["finest"], dt_factor=v["finest_dt"])
+        for sz in v["ladder"] or ():
+            add("ladder", "x".join(map(str, sz)), size=sz)
+        for n in v["cross"] or ():
+            add("cross-section", f"{int(n)}x{int(n)}", size=(v["cross_length"], int(n), int(n)))
+        for L in v["lengths"] or ():
+            add("length", f"{int(L)}", size=(int(L), v["length_cross"], v["length_cross"]))
+        for f in v["dt_factors"] or ():
+            add("time step", f"{f:g}", dt_factor=f)
+        for rc in v["rcs"] or ():
+            add("cutoff", f"{rc:g}", rc=rc)
+        for nz in v["noises"] or ():
+            add("noise", f"{nz:g} m/s", noise=nz)
+        for r in v["r0s"] or ():
+            add("r0", f"{r:g} um", r0=r)
+        return plan
+
+    def collect(self, run, plan):
+        """Every distinct run once, cheapest first (partial results come early); the table rows."""
+        scene = get_scene(run.v["scene"])
+        todo = []
+        for sweep, label, s in plan:
+            if _key(s) not in {_key(x[2]) for x in todo}:
+                todo.append((sweep, label, s))
+        todo.sort(key=lambda x: np.prod(x[2]["size"]) / x[2]["dt_factor"])
+        bar = run.bar(len(todo), f"convergence {run.mat} u={run.u:g}")
+        done = {}
+        for sweep, label, s in todo:
+            ov = dict(run.fwd)
+            ov.update({"size": "x".join(map(str, s["size"])), "dt_factor": s["dt_factor"], "rc": s["rc"],
+                       "noise": s["noise"], "r0": s["r0"]})
+            if bar is not None:
+                bar.set_postfix_str(f"{sweep} {label}")
+            done[_key(s)] = shock_row(*run.run_scene(scene, ov))
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        D_f = done[_key(plan[0][2])].get("D", float("nan"))
+        rows = []
+        for sweep, label, s in plan:
+            r = dict(done[_key(s)])
+            r.update({"sweep": sweep, "value": label, "size": "x".join(map(str, s["size"])),
+                      "dt_factor": s["dt_factor"], "rc": s["rc"], "noise": s["noise"], "r0": s["r0"]})
+            r["err_finest"] = (r["D"] / D_f - 1.0) if r.get("D") is not None and np.isfinite(D_f) else None
+            rows.append(r)
+        return plan[0][1], D_f, rows
+
+    def report(self, run, collected):
+        finest_label, D_f, rows = collected
+        v, mat, u = run.v, run.mat, run.u
+        front_f, front_e = _pareto(rows, run.defaults)
+        text = [format_table(rows, COLUMNS,
+                             f"convergence of D for {mat} [{run.base['direction']}] u = {u:g} km/s "
+                             f"(finest: {finest_label} at dt factor {v['finest_dt']:g}, D = {D_f:.4f} km/s)")]
+        text.append("Pareto: F = on the front of |error vs finest| against wall time, E = of |error vs experiment|, "
+                    "over the runs of the default model (rc, noise)")
+        r0rows = [r for r in rows if r["sweep"] == "r0" and r.get("D") is not None]
+        if len(r0rows) > 1:
+            Ds = np.array([r["D"] for r in r0rows])
+            dtxt = ", ".join(f"{d:.6f}" for d in Ds)
+            rtxt = ", ".join(f"{r['r0']:g}" for r in r0rows)
+            text.append(f"r0 at fixed geometry in cells: D = {dtxt} km/s for r0 = {rtxt} um: spread "
+                        f"{np.ptp(Ds) / Ds.mean():.2e} "
+                        "(scale-free: same trajectory in units of r0)")
+        lad = [r for r in rows if r["sweep"] in ("ladder", "finest") and r.get("wall_s")]
+        if lad:
+            w = [r["wall_s"] for r in lad]
+            text.append(f"resolution ladder: {len(lad)} samples, wall time {min(w):.2g}-{max(w):.3g} s "
+                        f"({max(w) / min(w):.0f}x)")
+        files = [write_csv(run.folder / "convergence.csv", rows)]
+        if v["plots"]:
+            files.append(_plot(run.folder / "convergence.png", rows, front_f, front_e, mat, u))
+        result = {"study": "convergence", "scene": v["scene"], "material": mat, "u_km_s": u,
+                  "finest": {"size": finest_label, "dt_factor": v["finest_dt"], "D": D_f},
+                  "runs": rows, "pareto_finest": front_f, "pareto_experiment": front_e,
+                  "markdown": markdown_table(rows, COLUMNS)}
+        return Report(result, text, files)
+
+
+convergence_study = register_study(ConvergenceStudy())
 
 
 def _plot(path, rows, front_f, front_e, mat, u):

@@ -26,7 +26,6 @@ seeds), ``dusting_count_vs_u.png``, ``dusting_layers.png`` (+ CSV),
 """
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +34,8 @@ from .. import units
 from ..errors import InputError
 from ..scenes import get_scene
 from ..scenes.base import Param
-from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, run_scene,
-                     write_csv, write_json)
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, run_scene, write_csv
 
 
 class DampingListParam(Param):
@@ -148,91 +147,104 @@ def _row(res, err, wall, u, rc, J, seed, r0):
     return row
 
 
-def dusting_study(overrides=None, out=None, progress=True, quiet=None):
-    """Run the dusting study (module docstring); returns a JSON-ready dict."""
-    t_start = time.perf_counter()
-    quiet = (not progress) if quiet is None else quiet
-    v, _ = parse_params(PARAMS, overrides, study="dusting")
-    scene = get_scene("dusting")
-    folder = out_folder(out, "dusting", f"{v['length'] / units.mm:g}mm")
-    cache = Path(v["cache"]) if v["cache"] else folder / "runs"
-    r0_um = _k(v["r0"] / units.um)
-    pu, ru = _k(v["profile_u"] / units.km_s), _k(v["resolution_u"] / units.km_s)
-    plan = []                          # (kind, u, rc, J, seed, r0)
-    for rc in v["rcs"]:
+class DustingStudy(Study):
+    """Numerical dusting of a shocked smooth free surface (module docstring)."""
+
+    name = "dusting"
+    summary = "dispersed clusters of a shocked smooth free surface against u, rc, damping and r0 (CD paper figs. 18-20)"
+    params = PARAMS
+    json_name = "dusting.json"
+
+    def tag(self, run):
+        return f"{run.v['length'] / units.mm:g}mm"
+
+    def plan(self, run):
+        """(kind, u, rc, J, seed, r0) of every run: the sweep, the profiles, the resolution."""
+        v = run.v
+        run.r0_um = r0_um = _k(v["r0"] / units.um)
+        run.pu = pu = _k(v["profile_u"] / units.km_s)
+        ru = _k(v["resolution_u"] / units.km_s)
+        plan = []
+        for rc in v["rcs"]:
+            for J in v["Js"]:
+                for u in v["us"]:
+                    for seed in v["seeds"]:
+                        plan.append(("sweep", _k(u), _k(rc), J, int(seed), r0_um))
         for J in v["Js"]:
-            for u in v["us"]:
-                for seed in v["seeds"]:
-                    plan.append(("sweep", _k(u), _k(rc), J, int(seed), r0_um))
-    for J in v["Js"]:
-        plan.append(("profile", pu, 1.1, J, int(v["seeds"][0]), r0_um))
-    for r in v["r0s"] or ():
-        for seed in v["resolution_seeds"]:
-            plan.append(("resolution", ru, 1.1, None, int(seed), _k(r)))
-    keys = []
-    for p in plan:
-        if p[1:] not in keys:
-            keys.append(p[1:])
-    # cheapest first (clusters ~ 1/r0^3, steps ~ (c0 + u)/r0; rc = 1.2 costs ~1.6x): partial results come early
-    keys.sort(key=lambda k: (k[4] ** -4) * (5.35 + k[0]) * (1.6 if k[1] > 1.15 else 1.0))
-    todo = [k for k in keys]
-    bar = progress_bar(len(todo), "dusting study", progress)
-    results = {}
-    if v["workers"] > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        with ProcessPoolExecutor(v["workers"], mp_context=mp.get_context("spawn")) as ex:
-            futs = [ex.submit(_worker, _overrides(v, *k), str(cache), v["reuse"]) for k in todo]
-            for fu in as_completed(futs):
-                fu.result()
+            plan.append(("profile", pu, 1.1, J, int(v["seeds"][0]), r0_um))
+        for r in v["r0s"] or ():
+            for seed in v["resolution_seeds"]:
+                plan.append(("resolution", ru, 1.1, None, int(seed), _k(r)))
+        return plan
+
+    def collect(self, run, plan):
+        """Every distinct run once, cheapest first (in ``workers`` processes); the rows by run key."""
+        v, cache = run.v, run.cache
+        scene = get_scene("dusting")
+        keys = []
+        for p in plan:
+            if p[1:] not in keys:
+                keys.append(p[1:])
+        # cheapest first (clusters ~ 1/r0^3, steps ~ (c0 + u)/r0; rc = 1.2 costs ~1.6x): partial results come early
+        keys.sort(key=lambda k: (k[4] ** -4) * (5.35 + k[0]) * (1.6 if k[1] > 1.15 else 1.0))
+        bar = run.bar(len(keys), "dusting study")
+        results = {}
+        if v["workers"] > 1:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+            with ProcessPoolExecutor(v["workers"], mp_context=mp.get_context("spawn")) as ex:
+                futs = [ex.submit(_worker, _overrides(v, *k), str(cache), v["reuse"]) for k in keys]
+                for fu in as_completed(futs):
+                    fu.result()
+                    if bar is not None:
+                        bar.update(1)
+            for k in keys:
+                results[k] = run_scene(scene, _overrides(v, *k), cache=cache, reuse=True)
+        else:
+            for k in keys:
+                if bar is not None:
+                    bar.set_postfix_str(f"u={k[0]:g} rc={k[1]:g} J={_jtxt(k[2])} seed={k[3]} r0={k[4]:g}")
+                results[k] = run.run_scene(scene, _overrides(v, *k))
                 if bar is not None:
                     bar.update(1)
-        for k in todo:
-            results[k] = run_scene(scene, _overrides(v, *k), cache=cache, reuse=True)
-    else:
-        for k in todo:
-            if bar is not None:
-                bar.set_postfix_str(f"u={k[0]:g} rc={k[1]:g} J={_jtxt(k[2])} seed={k[3]} r0={k[4]:g}")
-            results[k] = run_scene(scene, _overrides(v, *k), progress=progress, cache=cache, reuse=v["reuse"])
-            if bar is not None:
-                bar.update(1)
-    if bar is not None:
-        bar.close()
-    rows = {k: _row(*results[k], *k) for k in keys}
-    sweep_rows = [rows[p[1:]] for p in plan if p[0] == "sweep"]
-    summary = _summary(sweep_rows)
-    prof = {_jtxt(J): rows[(pu, 1.1, J, int(v["seeds"][0]), r0_um)] for J in v["Js"]}
-    res_rows = [rows[p[1:]] for p in plan if p[0] == "resolution"]
-    headline = _headline(rows, v, pu, r0_um)
-    text = [format_table(sweep_rows, RUN_COLUMNS, f"dusting runs: aluminium, {v['length'] / units.mm:g} mm, "
-                         f"r0 = {r0_um:g} um, 2 x 2 periods, g_max = 10"),
-            format_table(summary, SWEEP_COLUMNS, "dispersed clusters per mm^2 over the seeds"),
-            format_table(res_rows, RES_COLUMNS, f"resolution: u = {v['resolution_u'] / units.km_s:g} km/s, rc = 1.1, "
-                         "damping off"),
-            _headline_text(headline)]
-    plain = [{k: x for k, x in r.items() if k not in ("layers", "series")} for r in rows.values()]
-    files = [write_csv(folder / "dusting_runs.csv", plain), write_csv(folder / "dusting_sweep.csv", summary),
-             write_csv(folder / "dusting_resolution.csv",
-                       [{k: x for k, x in r.items() if k not in ("layers", "series")} for r in res_rows])]
-    if v["plots"]:
-        files.append(_plot_counts(folder / "dusting_count_vs_u.png", summary, sweep_rows, v))
-        files += _plot_layers(folder / "dusting_layers.png", prof, v)
-        files += _plot_series(folder / "dusting_time.png", rows, v, r0_um)
-        if res_rows:
-            files.append(_plot_resolution(folder / "dusting_resolution.png", res_rows))
-    result = {"study": "dusting", "length_mm": v["length"] / units.mm, "r0_um": r0_um, "runs": plain,
-              "sweep": summary, "resolution": [{k: x for k, x in r.items() if k not in ("layers", "series")}
-                                              for r in res_rows],
-              "headline": headline, "markdown": {"sweep": markdown_table(summary, SWEEP_COLUMNS),
-                                                 "resolution": markdown_table(res_rows, RES_COLUMNS),
-                                                 "runs": markdown_table(sweep_rows, RUN_COLUMNS)},
-              "wall_time_s": time.perf_counter() - t_start}
-    files.append(write_json(folder / "dusting.json", result))
-    result["files"] = [str(f) for f in files]
-    text.append("wrote " + ", ".join(str(f) for f in files))
-    if not quiet:
-        print("\n\n".join(text))
-    return result
+        if bar is not None:
+            bar.close()
+        return plan, {k: _row(*results[k], *k) for k in keys}
+
+    def report(self, run, collected):
+        plan, rows = collected
+        v, folder, r0_um, pu = run.v, run.folder, run.r0_um, run.pu
+        sweep_rows = [rows[p[1:]] for p in plan if p[0] == "sweep"]
+        summary = _summary(sweep_rows)
+        prof = {_jtxt(J): rows[(pu, 1.1, J, int(v["seeds"][0]), r0_um)] for J in v["Js"]}
+        res_rows = [rows[p[1:]] for p in plan if p[0] == "resolution"]
+        headline = _headline(rows, v, pu, r0_um)
+        text = [format_table(sweep_rows, RUN_COLUMNS, f"dusting runs: aluminium, {v['length'] / units.mm:g} mm, "
+                             f"r0 = {r0_um:g} um, 2 x 2 periods, g_max = 10"),
+                format_table(summary, SWEEP_COLUMNS, "dispersed clusters per mm^2 over the seeds"),
+                format_table(res_rows, RES_COLUMNS, f"resolution: u = {v['resolution_u'] / units.km_s:g} km/s, "
+                             "rc = 1.1, damping off"),
+                _headline_text(headline)]
+        plain = [{k: x for k, x in r.items() if k not in ("layers", "series")} for r in rows.values()]
+        files = [write_csv(folder / "dusting_runs.csv", plain), write_csv(folder / "dusting_sweep.csv", summary),
+                 write_csv(folder / "dusting_resolution.csv",
+                           [{k: x for k, x in r.items() if k not in ("layers", "series")} for r in res_rows])]
+        if v["plots"]:
+            files.append(_plot_counts(folder / "dusting_count_vs_u.png", summary, sweep_rows, v))
+            files += _plot_layers(folder / "dusting_layers.png", prof, v)
+            files += _plot_series(folder / "dusting_time.png", rows, v, r0_um)
+            if res_rows:
+                files.append(_plot_resolution(folder / "dusting_resolution.png", res_rows))
+        result = {"study": "dusting", "length_mm": v["length"] / units.mm, "r0_um": r0_um, "runs": plain,
+                  "sweep": summary, "resolution": [{k: x for k, x in r.items() if k not in ("layers", "series")}
+                                                  for r in res_rows],
+                  "headline": headline, "markdown": {"sweep": markdown_table(summary, SWEEP_COLUMNS),
+                                                     "resolution": markdown_table(res_rows, RES_COLUMNS),
+                                                     "runs": markdown_table(sweep_rows, RUN_COLUMNS)}}
+        return Report(result, text, files)
+
+
+dusting_study = register_study(DustingStudy())
 
 
 def _summary(rows):

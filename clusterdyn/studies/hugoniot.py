@@ -30,25 +30,22 @@ rc, J, noise, seed, dt_factor, frames, attraction, ...) is passed to every run.
 """
 
 import math
-import time
-from pathlib import Path
 
 import numpy as np
 
 from .. import units
+from ..analysis.elastic import uniaxial_stress
 from ..analysis.shock import (STEADY_D_HALVES, STEADY_FIT_RMS, STEADY_U_TOL, hugoniot_interpolant,
                               mixture_D)
-from ..build import fcc_packing, repeat_lengths
 from ..build.lattice import LATTICE_CL
 from ..build.two_phase import PAPER_CASES
-from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..scenes import get_scene
 from ..scenes.base import Param
 from ..scenes.shock import CD_MATERIALS, U_MAX, ShockScene, cold_shock_state
-from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
-                     run_scene, shock_row, write_csv, write_json)
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, shock_row, write_csv
 
 DEFAULT_U = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
 
@@ -118,35 +115,6 @@ def _fwd_with(fwd, **kw):
 
 
 # --------------------------------------------------------------------------- static checks
-def uniaxial_stress(material, deltas, direction="100", rc=1.15, attraction="all", r0=5 * units.um):
-    """Longitudinal stress ``-sigma_xx`` of the lattice under uniaxial compression (ASE units).
-
-    A periodic fcc block with ``direction`` along x is compressed along x only,
-    to density ``delta * rho0`` (affine, no relaxation: every cluster of an fcc
-    lattice is a centre of symmetry, so the affine state is in equilibrium),
-    and the virial stress is read.  With ``attraction="initial"`` the pairs
-    within the cutoff before compression are the set-up bonds.
-
-    Returns
-    -------
-    (n,) array of ``-sigma_xx`` (eV/Angstrom^3).
-    """
-    L = repeat_lengths(direction, r0)
-    size = tuple(int(max(2, math.ceil(4.5 * r0 / x))) for x in L)
-    base = fcc_packing(material, r0, size=size, direction=direction, pbc=True)
-    if attraction == "initial":
-        mark_initial_bonds(base, rc)
-    out = []
-    for d in np.atleast_1d(deltas):
-        a = base.copy()
-        cell = a.cell.array.copy()
-        cell[0, 0] /= d
-        a.set_cell(cell, scale_atoms=True)
-        a.calc = ClusterDynamics(rc=rc, attraction=attraction)
-        out.append(-a.get_stress()[0])
-    return np.array(out)
-
-
 def cold_curve_du(material, deltas):
     """The cold curve's image in the D-u plane (Rayleigh line from rest to P_x(delta)); km/s."""
     mat = get_material(material)
@@ -167,170 +135,185 @@ def stress_du(sigma, deltas, rho0):
 
 
 # --------------------------------------------------------------------------- the study
-def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
-    """Run the Hugoniot study (see the module docstring); returns a JSON-ready dict."""
-    t_start = time.perf_counter()
-    quiet = (not progress) if quiet is None else quiet
-    scene = get_scene("shock")
-    v, fwd = parse_params(PARAMS, overrides, forward=scene, study="hugoniot")
-    if v["case"] is not None:
-        m, inc, frac, dia = PAPER_CASES[v["case"]]
-        v["material"] = m
-        fwd.setdefault("inclusion", inc)
-        fwd.setdefault("inclusion_fraction", frac)
-        fwd.setdefault("inclusion_diameter", f"{dia / units.um:g}um")
-        fwd.setdefault("r0", "4um")
-    sv = scene.parse(_fwd_with(fwd, material=v["material"]))
-    two = sv["inclusion"] is not None
-    mat = v["material"]
-    tag = (f"{mat}+{sv['inclusion']}" if two else mat) + (f"-{sv['direction']}" if sv["direction"] != "100" else "")
-    folder = out_folder(out, "hugoniot", tag)
-    cache = Path(v["cache"]) if v["cache"] else folder / "runs"
+def _row_info(row, res, ov, pv, n, group):
+    """Complete a run's table row: its place in the plan, its parameters, the cold-curve D and the
+    experimental range (one phase) or the sample's fractions (two phases)."""
+    row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
+                "J": pv["J"], "attraction": pv["attraction"], "noise_m_s": pv["noise"]["value"],
+                "size": "x".join(map(str, pv["size"])), "direction": pv["direction"]})
+    if not (res is not None and "two_phase" in res.extra):
+        d_c, _ = cold_shock_state(ov["material"], float(ov["u"]) * units.km_s)
+        row["D_cold"] = float(ov["u"]) / (1.0 - 1.0 / d_c)
+        try:
+            row["exp_range"] = ("extrap." if float(ov["u"]) * units.km_s > hugoniot(ov["material"]).u_max
+                                * (1 + 1e-9) else "meas.")
+        except InputError:
+            pass
+    if res is not None and "two_phase" in res.extra:
+        row["inclusion_mass_fraction"] = res.extra["two_phase"]["mass_fraction"]
+        row["inclusion_volume_fraction"] = res.extra["two_phase"]["volume_fraction"]
+        row["rho0"] = res.extra["rho0_g_cm3"]
+    return row
 
-    # ---- the list of runs
-    plan = []     # (group, overrides)
-    for u in v["u"]:
-        plan.append(("main", _fwd_with(fwd, material=mat, u=u)))
-    if v["compare_J"] is not None:
-        for u in v["u"]:
-            plan.append(("damped", _fwd_with(fwd, material=mat, u=u, J=v["compare_J"])))
-    if v["compare_attraction"]:
-        for u in v["u"]:
-            plan.append(("attraction=initial", _fwd_with(fwd, material=mat, u=u, attraction="initial")))
-    if v["low_u"]:
-        lsize = "x".join(map(str, v["low_u_size"]))
-        for u in v["low_u"]:
-            noise = f"{v['low_u_noise'] / units.m_s:g}m/s"
-            plan.append(("low-u", _fwd_with(fwd, material=mat, u=u, size=lsize, noise=noise,
-                                             frames=v["low_u_frames"])))
-        # the same weakest shock with the sweep's noise, to show what the noise does there
-        plan.append(("low-u noise check", _fwd_with(fwd, material=mat, u=min(v["low_u"]), size=lsize,
-                                                     frames=v["low_u_frames"])))
-    phases = {}
-    if two:
-        pu = sorted(set(v["u"]) | set(v["phase_u"] or ()))
-        pure = {k: x for k, x in fwd.items() if not k.startswith("inclusion")}
-        if v["phase_size"] is not None:
-            pure["size"] = "x".join(map(str, v["phase_size"]))
-        phases = {"matrix": mat, "inclusion": sv["inclusion"]}
-        for role, m in phases.items():
-            for u in pu:
-                plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
 
-    def run_row(ov):
-        res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
+def _damping_table(main, rows, J):
+    damp = [r for r in rows if r["group"] == "damped"]
+    tab = []
+    for a, b in zip(main, damp):
+        tab.append({"u": a["u_piston"], "D_off": a["D"], "D_on": b["D"], "shift": b["D"] / a["D"] - 1.0,
+                    "err_off": a["err_ref"], "err_on": b["err_ref"], "steady_on": b["steady"]})
+    cols = [("u", "u km/s", ".3g"), ("D_off", "D (J off)", ".4f"), ("D_on", f"D (J={J:g})", ".4f"),
+            ("shift", "shift", "+.2%"), ("err_off", "err off", "+.2%"), ("err_on", "err on", "+.2%"),
+            ("steady_on", "steady on", "")]
+    return tab, cols, f"damping on (J = {J:g}) against off: shift of D"
+
+
+def _attraction_table(main, rows):
+    att = [r for r in rows if r["group"] == "attraction=initial"]
+    tab = [{"u": a["u_piston"], "D_all": a["D"], "D_initial": b["D"], "D_ref": a["D_ref"],
+            "err_all": a["err_ref"], "err_initial": b["err_ref"], "steady": b["steady"],
+            "mass": b["mass_check"], "momentum": b["momentum_check"]} for a, b in zip(main, att)]
+    cols = [("u", "u km/s", ".3g"), ("D_all", "D all", ".4f"), ("D_initial", "D initial", ".4f"),
+            ("D_ref", "D_exp", ".4f"), ("err_all", "err all", "+.2%"), ("err_initial", "err initial", "+.2%"),
+            ("mass", "mass (ini)", "+.2%"), ("momentum", "mom. (ini)", "+.2%"), ("steady", "steady", "")]
+    return tab, cols, "attraction between all pairs in the cutoff against set-up bonds only"
+
+
+class HugoniotStudy(Study):
+    """The piston-speed sweep of the shock scene (module docstring)."""
+
+    name = "hugoniot"
+    summary = ("piston-speed sweep of the shock scene: D-u and P-rho against the experimental Hugoniot (also "
+               "forwards the shock scene's parameters)")
+    params = PARAMS
+    scene = "shock"
+    json_name = "hugoniot.json"
+
+    def prepare(self, run):
+        v, fwd = run.v, run.fwd
+        if v["case"] is not None:
+            m, inc, frac, dia = PAPER_CASES[v["case"]]
+            v["material"] = m
+            fwd.setdefault("inclusion", inc)
+            fwd.setdefault("inclusion_fraction", frac)
+            fwd.setdefault("inclusion_diameter", f"{dia / units.um:g}um")
+            fwd.setdefault("r0", "4um")
+        run.sv = sv = get_scene("shock").parse(_fwd_with(fwd, material=v["material"]))
+        run.two = sv["inclusion"] is not None
+        mat = v["material"]
+        run.label = ((f"{mat}+{sv['inclusion']}" if run.two else mat)
+                     + (f"-{sv['direction']}" if sv["direction"] != "100" else ""))
+
+    def tag(self, run):
+        return run.label
+
+    def plan(self, run):
+        """(group, overrides) of every run; sets ``run.phases`` (the pure phases of a two-phase sample)."""
+        v, fwd, mat = run.v, run.fwd, run.v["material"]
+        plan = [("main", _fwd_with(fwd, material=mat, u=u)) for u in v["u"]]
+        if v["compare_J"] is not None:
+            plan += [("damped", _fwd_with(fwd, material=mat, u=u, J=v["compare_J"])) for u in v["u"]]
+        if v["compare_attraction"]:
+            plan += [("attraction=initial", _fwd_with(fwd, material=mat, u=u, attraction="initial")) for u in v["u"]]
+        if v["low_u"]:
+            lsize = "x".join(map(str, v["low_u_size"]))
+            for u in v["low_u"]:
+                noise = f"{v['low_u_noise'] / units.m_s:g}m/s"
+                plan.append(("low-u", _fwd_with(fwd, material=mat, u=u, size=lsize, noise=noise,
+                                                 frames=v["low_u_frames"])))
+            # the same weakest shock with the sweep's noise, to show what the noise does there
+            plan.append(("low-u noise check", _fwd_with(fwd, material=mat, u=min(v["low_u"]), size=lsize,
+                                                         frames=v["low_u_frames"])))
+        run.phases = {}
+        if run.two:
+            pu = sorted(set(v["u"]) | set(v["phase_u"] or ()))
+            pure = {k: x for k, x in fwd.items() if not k.startswith("inclusion")}
+            if v["phase_size"] is not None:
+                pure["size"] = "x".join(map(str, v["phase_size"]))
+            run.phases = {"matrix": mat, "inclusion": run.sv["inclusion"]}
+            for role, m in run.phases.items():
+                for u in pu:
+                    plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
+        return plan
+
+    @staticmethod
+    def _run_row(run, ov):
+        scene = get_scene("shock")
+        res, err, wall = run.run_scene(scene, ov)
         pv = scene.display(scene.parse(ov))
         # the sample that ran (size=auto resolved)
         pv["size"] = tuple(res.extra["size_used"]) if res is not None and "size_used" in res.extra else \
             tuple(ShockScene.size(scene.parse(ov)))
         return res, shock_row(res, err, wall), pv
 
-    rows = []
-    bar = progress_bar(len(plan), f"hugoniot {tag}", progress)
-    for n, (group, ov) in enumerate(plan):
-        if bar is not None:
-            bar.set_postfix_str(f"{group} u={ov['u']}")
-        res, row, pv = run_row(ov)
-        long_size = _refine_size(row, group, pv["size"], v["refine_length"])
-        if long_size is not None:
+    def collect(self, run, plan):
+        """The rows of every run; a steady run off a conservation check is run again on a longer sample."""
+        rows = []
+        bar = run.bar(len(plan), f"hugoniot {run.label}")
+        for n, (group, ov) in enumerate(plan):
             if bar is not None:
-                bar.set_postfix_str(f"{group} u={ov['u']} on {long_size}")
-            short = {f"{k}_short": row.get(k) for k in ("D", "D_mass", "mass_check", "momentum_check",
-                                                         "steady", "wall_s")}
-            short["size_short"] = "x".join(map(str, pv["size"]))
-            ov = _fwd_with(ov, size=long_size)
-            res, row, pv = run_row(ov)
-            row.update(short)
-        row.update({"run": n, "group": group, "material": ov["material"], "u_piston": float(ov["u"]),
-                    "J": pv["J"], "attraction": pv["attraction"], "noise_m_s": pv["noise"]["value"],
-                    "size": "x".join(map(str, pv["size"])), "direction": pv["direction"]})
-        if not (res is not None and "two_phase" in res.extra):
-            d_c, _ = cold_shock_state(ov["material"], float(ov["u"]) * units.km_s)
-            row["D_cold"] = float(ov["u"]) / (1.0 - 1.0 / d_c)
-            try:
-                row["exp_range"] = ("extrap." if float(ov["u"]) * units.km_s > hugoniot(ov["material"]).u_max
-                                    * (1 + 1e-9) else "meas.")
-            except InputError:
-                pass
-        if res is not None and "two_phase" in res.extra:
-            row["inclusion_mass_fraction"] = res.extra["two_phase"]["mass_fraction"]
-            row["inclusion_volume_fraction"] = res.extra["two_phase"]["volume_fraction"]
-            row["rho0"] = res.extra["rho0_g_cm3"]
-        rows.append(row)
+                bar.set_postfix_str(f"{group} u={ov['u']}")
+            res, row, pv = self._run_row(run, ov)
+            long_size = _refine_size(row, group, pv["size"], run.v["refine_length"])
+            if long_size is not None:
+                if bar is not None:
+                    bar.set_postfix_str(f"{group} u={ov['u']} on {long_size}")
+                short = {f"{k}_short": row.get(k) for k in ("D", "D_mass", "mass_check", "momentum_check",
+                                                             "steady", "wall_s")}
+                short["size_short"] = "x".join(map(str, pv["size"]))
+                ov = _fwd_with(ov, size=long_size)
+                res, row, pv = self._run_row(run, ov)
+                row.update(short)
+            rows.append(_row_info(row, res, ov, pv, n, group))
+            if bar is not None:
+                bar.update(1)
         if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+            bar.close()
+        return rows
 
-    summary = {}
-    text = []
-    main = [r for r in rows if r["group"] == "main"]
-    title = (f"CD Hugoniot of {tag} [{sv['direction']}], r0 = {sv['r0'] / units.um:g} um, rc = {sv['rc']:g}, "
-             f"size {sv['size'] if isinstance(sv['size'], str) else 'x'.join(map(str, sv['size']))}, "
-             f"J = {sv['J'] if sv['J'] else 'off'}, noise "
-             f"{sv['noise'] / units.m_s:g} m/s, attraction = {sv['attraction']}")
-    text.append(format_table(main, MAIN_COLUMNS, title))
-    text.append(_conservation_verdict(main))
-    summary["main"] = _strip(main)
-
-    if v["compare_J"] is not None:
-        damp = [r for r in rows if r["group"] == "damped"]
-        tab = []
-        for a, b in zip(main, damp):
-            tab.append({"u": a["u_piston"], "D_off": a["D"], "D_on": b["D"], "shift": b["D"] / a["D"] - 1.0,
-                        "err_off": a["err_ref"], "err_on": b["err_ref"], "steady_on": b["steady"]})
-        cols = [("u", "u km/s", ".3g"), ("D_off", "D (J off)", ".4f"), ("D_on", f"D (J={v['compare_J']:g})", ".4f"),
-                ("shift", "shift", "+.2%"), ("err_off", "err off", "+.2%"), ("err_on", "err on", "+.2%"),
-                ("steady_on", "steady on", "")]
-        text.append(format_table(tab, cols, f"damping on (J = {v['compare_J']:g}) against off: shift of D"))
-        summary["damping"] = tab
-        summary["damping_md"] = markdown_table(tab, cols)
-
-    if v["compare_attraction"]:
-        att = [r for r in rows if r["group"] == "attraction=initial"]
-        tab = [{"u": a["u_piston"], "D_all": a["D"], "D_initial": b["D"], "D_ref": a["D_ref"],
-                "err_all": a["err_ref"], "err_initial": b["err_ref"], "steady": b["steady"],
-                "mass": b["mass_check"], "momentum": b["momentum_check"]} for a, b in zip(main, att)]
-        cols = [("u", "u km/s", ".3g"), ("D_all", "D all", ".4f"), ("D_initial", "D initial", ".4f"),
-                ("D_ref", "D_exp", ".4f"), ("err_all", "err all", "+.2%"), ("err_initial", "err initial", "+.2%"),
-                ("mass", "mass (ini)", "+.2%"), ("momentum", "mom. (ini)", "+.2%"), ("steady", "steady", "")]
-        text.append(format_table(tab, cols, "attraction between all pairs in the cutoff against set-up bonds only"))
-        summary["attraction"] = tab
-        summary["attraction_md"] = markdown_table(tab, cols)
-
-    if v["low_u"]:
-        lu = _low_u(rows, mat, sv, two)
-        text.append(lu.pop("text"))
-        summary["low_u"] = lu
-
-    if two:
-        mix = _mixture(rows, main, phases, tag)
-        text.append(mix.pop("text"))
-        summary["mixture"] = mix
-
-    uni = None
-    if v["uniaxial"]:
-        uni = _uniaxial(mat, sv, two)
+    def report(self, run, rows):
+        v, sv, two, mat = run.v, run.sv, run.two, run.v["material"]
+        summary, text = {}, []
+        main = [r for r in rows if r["group"] == "main"]
+        title = (f"CD Hugoniot of {run.label} [{sv['direction']}], r0 = {sv['r0'] / units.um:g} um, rc = {sv['rc']:g}, "
+                 f"size {sv['size'] if isinstance(sv['size'], str) else 'x'.join(map(str, sv['size']))}, "
+                 f"J = {sv['J'] if sv['J'] else 'off'}, noise "
+                 f"{sv['noise'] / units.m_s:g} m/s, attraction = {sv['attraction']}")
+        text.append(format_table(main, MAIN_COLUMNS, title))
+        text.append(_conservation_verdict(main))
+        summary["main"] = _strip(main)
+        for key, on, table in (("damping", v["compare_J"] is not None, lambda: _damping_table(main, rows, v["compare_J"])),
+                               ("attraction", v["compare_attraction"], lambda: _attraction_table(main, rows))):
+            if on:
+                tab, cols, title = table()
+                text.append(format_table(tab, cols, title))
+                summary[key] = tab
+                summary[f"{key}_md"] = markdown_table(tab, cols)
+        if v["low_u"]:
+            lu = _low_u(rows, mat, sv, two)
+            text.append(lu.pop("text"))
+            summary["low_u"] = lu
+        if two:
+            mix = _mixture(rows, main, run.phases, run.label)
+            text.append(mix.pop("text"))
+            summary["mixture"] = mix
+        uni = _uniaxial(mat, sv, two) if v["uniaxial"] else None
         if uni is not None:
             text.append(uni.pop("text"))
             summary["uniaxial"] = {k: x for k, x in uni.items() if k != "arrays"}
+        files = [write_csv(run.folder / "hugoniot.csv", _strip(rows))]
+        if uni is not None:
+            files.append(write_csv(run.folder / "uniaxial.csv", uni["rows"]))
+        if v["plots"]:
+            files += _plots(run.folder, rows, mat, sv, two, run.phases, summary, uni)
+        result = {"study": "hugoniot", "material": run.label, "direction": sv["direction"],
+                  "params": {k: (list(x) if isinstance(x, tuple) else x) for k, x in v.items()},
+                  "scene_overrides": run.fwd, "runs": _strip(rows), "summary": summary,
+                  "files": [str(f) for f in files]}
+        return Report(result, text, files)
 
-    files = []
-    files.append(write_csv(folder / "hugoniot.csv", _strip(rows)))
-    if uni is not None:
-        files.append(write_csv(folder / "uniaxial.csv", uni["rows"]))
-    if v["plots"]:
-        files += _plots(folder, rows, mat, sv, two, phases, summary, uni)
-    result = {"study": "hugoniot", "material": tag, "direction": sv["direction"],
-              "params": {k: (list(x) if isinstance(x, tuple) else x) for k, x in v.items()},
-              "scene_overrides": fwd, "runs": _strip(rows), "summary": summary,
-              "files": [str(f) for f in files], "wall_time_s": time.perf_counter() - t_start}
-    files.append(write_json(folder / "hugoniot.json", result))
-    result["files"] = [str(f) for f in files]
-    text.append("wrote " + ", ".join(str(f) for f in files))
-    if not quiet:
-        print("\n\n".join(text))
-    return result
+
+hugoniot_study = register_study(HugoniotStudy())
 
 
 def _strip(rows):
@@ -523,26 +506,54 @@ def _uniaxial(mat, sv, two):
 
 
 # --------------------------------------------------------------------------- figures
+class _Figs:
+    """What every figure of the study draws from: the finite runs by group, the axes' range, the
+    marker styles, the experimental Hugoniot (one phase) and the materials of the cold curves."""
+
+    def __init__(self, folder, rows, mat, sv, two, phases):
+        from ..scenes.common import matplotlib_agg
+        self.plt = matplotlib_agg()
+        self.folder, self.mat, self.sv, self.two, self.phases = folder, mat, sv, two, phases
+        self.groups = {}
+        for r in rows:
+            if r.get("D") is None or not np.isfinite(r.get("D", np.nan)):
+                continue
+            self.groups.setdefault(r["group"], []).append(r)
+        self.umax = max([r["u_piston"] for r in rows] + [1.0]) * 1.08
+        self.style = {"main": ("o", "C0", "CD" + (" two-phase" if two else "")), "damped": ("s", "C1", "CD damped"),
+                      "attraction=initial": ("D", "C2", "CD attraction=initial"),
+                      "low-u": ("v", "C4", "CD weak shocks"), "low-u noise check": ("x", "C4", "CD weak shock, sweep noise")}
+        self.ref = None
+        if not two:
+            try:
+                self.ref = hugoniot(mat)
+            except InputError:
+                self.ref = None
+        self.names = [mat] if not two else list(phases.values())
+
+    def save(self, fig, name):
+        fig.tight_layout()
+        p = self.folder / name
+        fig.savefig(p, dpi=120)
+        self.plt.close(fig)
+        return p
+
+
 def _plots(folder, rows, mat, sv, two, phases, summary, uni):
-    from ..scenes.common import matplotlib_agg
-    plt = matplotlib_agg()
-    files = []
-    groups = {}
-    for r in rows:
-        if r.get("D") is None or not np.isfinite(r.get("D", np.nan)):
-            continue
-        groups.setdefault(r["group"], []).append(r)
-    umax = max([r["u_piston"] for r in rows] + [1.0]) * 1.08
-    style = {"main": ("o", "C0", "CD" + (" two-phase" if two else "")), "damped": ("s", "C1", "CD damped"),
-             "attraction=initial": ("D", "C2", "CD attraction=initial"), "low-u": ("v", "C4", "CD weak shocks"),
-             "low-u noise check": ("x", "C4", "CD weak shock, sweep noise")}
-    ref = None
-    if not two:
-        try:
-            ref = hugoniot(mat)
-        except InputError:
-            ref = None
-    # --- D-u
+    """The study's figures (D-u, P-rho, weak shocks, static uniaxial compression); returns their paths."""
+    f = _Figs(folder, rows, mat, sv, two, phases)
+    files = [_plot_du(f, summary, uni), _plot_prho(f, uni)]
+    if "low_u" in summary and "D0" in summary["low_u"]:
+        files.append(_plot_low_u(f, summary["low_u"]))
+    if uni is not None:
+        files.append(_plot_uniaxial(f, uni))
+    return files
+
+
+def _plot_du(f, summary, uni):
+    """D-u: the CD runs, the experiment, the cold curve's and the static lattice's images."""
+    plt, groups, umax, style, ref, names = f.plt, f.groups, f.umax, f.style, f.ref, f.names
+    mat, sv, two, phases = f.mat, f.sv, f.two, f.phases
     fig, ax = plt.subplots(figsize=(7, 5.2))
     uu = np.linspace(0.0, umax, 200)
     if ref is not None:
@@ -551,7 +562,6 @@ def _plots(folder, rows, mat, sv, two, phases, summary, uni):
         if not meas.all():
             ax.plot(uu[~meas], ref.D(uu[~meas] * units.km_s) / units.km_s, "k--", lw=1.0,
                     label=f"{ref.name} extrapolated beyond u = {ref.u_max / units.km_s:g} km/s")
-    names = [mat] if not two else list(phases.values())
     for k, m in enumerate(names):
         dd = np.linspace(1.0005, 3.0, 400)
         cu, cD = cold_curve_du(m, dd)
@@ -591,12 +601,13 @@ def _plots(folder, rows, mat, sv, two, phases, summary, uni):
     ax.set_title(f"D-u: {mat}{' + ' + phases.get('inclusion', '') if two else ''} [{sv['direction']}], "
                  f"r0 = {sv['r0'] / units.um:g} um")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    p = folder / "hugoniot_du.png"
-    fig.savefig(p, dpi=120)
-    plt.close(fig)
-    files.append(p)
-    # --- P-rho
+    return f.save(fig, "hugoniot_du.png")
+
+
+def _plot_prho(f, uni):
+    """P-rho: the CD runs, the cold curves, the experiment and the static lattice."""
+    plt, groups, umax, style, ref, names = f.plt, f.groups, f.umax, f.style, f.ref, f.names
+    mat, sv, two, phases = f.mat, f.sv, f.two, f.phases
     fig, ax = plt.subplots(figsize=(7, 5.2))
     for k, m in enumerate(names):
         mm = get_material(m)
@@ -626,49 +637,43 @@ def _plots(folder, rows, mat, sv, two, phases, summary, uni):
     ymax = max([r["P"] for rr in groups.values() for r in rr if np.isfinite(r.get("P", np.nan))] + [1.0]) * 1.15
     ax.set_ylim(0, ymax)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    p = folder / "hugoniot_prho.png"
-    fig.savefig(p, dpi=120)
-    plt.close(fig)
-    files.append(p)
-    if "low_u" in summary and "D0" in summary["low_u"]:
-        lu = summary["low_u"]
-        fig, ax = plt.subplots(figsize=(6, 4.2))
-        rr = groups.get("low-u", [])
-        ax.errorbar([r["u_piston"] for r in rr], [r["D"] for r in rr], yerr=[r["D_err"] for r in rr], fmt="v",
-                    color="C4", label="CD weak shocks")
-        x = np.linspace(0, max(r["u_piston"] for r in rr) * 1.1, 10)
-        ax.plot(x, lu["D0"] + lu["slope"] * x, "C4-", lw=1, label=f"fit, D0 = {lu['D0']:.3f} km/s")
-        if "lattice_cL" in lu:
-            ax.axhline(lu["lattice_cL"], color="k", ls="--", lw=1,
-                       label=f"lattice c_L [{sv['direction']}] = {lu['lattice_cL']:.3f} km/s")
-            ax.axhline(lu["c0"], color="k", ls=":", lw=1, label=f"c0 = {lu['c0']:.3f} km/s")
-        if ref is not None:
-            ax.plot(x, ref.D(x * units.km_s) / units.km_s, "k-", lw=1, label=f"experiment ({ref.name})")
-        ax.set_xlabel("piston speed u (km/s)")
-        ax.set_ylabel("D (km/s)")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        p = folder / "low_u.png"
-        fig.savefig(p, dpi=120)
-        plt.close(fig)
-        files.append(p)
-    if uni is not None:
-        dl, sa, si, Px = uni["arrays"]
-        fig, ax = plt.subplots(figsize=(6, 4.2))
-        ax.plot(dl, sa / units.GPa, "o-", color="C3", ms=3, label="-sigma_xx, all pairs attract")
-        ax.plot(dl, si / units.GPa, "s-", color="C2", ms=3, label="-sigma_xx, set-up bonds only")
-        ax.plot(dl, Px / units.GPa, "k:", label="cold curve P_x (hydrostatic)")
-        if sv["direction"] == "100":
-            ax.axvline(math.sqrt(2) / sv["rc"], color="0.5", lw=0.8)
-            ax.text(math.sqrt(2) / sv["rc"], ax.get_ylim()[1] * 0.9, " 2nd neighbours\n enter rc", fontsize=7)
-        ax.set_xlabel("rho/rho0 (uniaxial strain)")
-        ax.set_ylabel("GPa")
-        ax.set_title(f"static uniaxial compression along [{sv['direction']}], rc = {sv['rc']:g}")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        p = folder / "uniaxial.png"
-        fig.savefig(p, dpi=120)
-        plt.close(fig)
-        files.append(p)
-    return files
+    return f.save(fig, "hugoniot_prho.png")
+
+
+def _plot_low_u(f, lu):
+    """The weak shocks and their extrapolation to u = 0."""
+    plt, groups, ref, sv = f.plt, f.groups, f.ref, f.sv
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    rr = groups.get("low-u", [])
+    ax.errorbar([r["u_piston"] for r in rr], [r["D"] for r in rr], yerr=[r["D_err"] for r in rr], fmt="v",
+                color="C4", label="CD weak shocks")
+    x = np.linspace(0, max(r["u_piston"] for r in rr) * 1.1, 10)
+    ax.plot(x, lu["D0"] + lu["slope"] * x, "C4-", lw=1, label=f"fit, D0 = {lu['D0']:.3f} km/s")
+    if "lattice_cL" in lu:
+        ax.axhline(lu["lattice_cL"], color="k", ls="--", lw=1,
+                   label=f"lattice c_L [{sv['direction']}] = {lu['lattice_cL']:.3f} km/s")
+        ax.axhline(lu["c0"], color="k", ls=":", lw=1, label=f"c0 = {lu['c0']:.3f} km/s")
+    if ref is not None:
+        ax.plot(x, ref.D(x * units.km_s) / units.km_s, "k-", lw=1, label=f"experiment ({ref.name})")
+    ax.set_xlabel("piston speed u (km/s)")
+    ax.set_ylabel("D (km/s)")
+    ax.legend(fontsize=7)
+    return f.save(fig, "low_u.png")
+
+
+def _plot_uniaxial(f, uni):
+    """The static uniaxial compression of the lattice."""
+    plt, sv = f.plt, f.sv
+    dl, sa, si, Px = uni["arrays"]
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    ax.plot(dl, sa / units.GPa, "o-", color="C3", ms=3, label="-sigma_xx, all pairs attract")
+    ax.plot(dl, si / units.GPa, "s-", color="C2", ms=3, label="-sigma_xx, set-up bonds only")
+    ax.plot(dl, Px / units.GPa, "k:", label="cold curve P_x (hydrostatic)")
+    if sv["direction"] == "100":
+        ax.axvline(math.sqrt(2) / sv["rc"], color="0.5", lw=0.8)
+        ax.text(math.sqrt(2) / sv["rc"], ax.get_ylim()[1] * 0.9, " 2nd neighbours\n enter rc", fontsize=7)
+    ax.set_xlabel("rho/rho0 (uniaxial strain)")
+    ax.set_ylabel("GPa")
+    ax.set_title(f"static uniaxial compression along [{sv['direction']}], rc = {sv['rc']:g}")
+    ax.legend(fontsize=7)
+    return f.save(fig, "uniaxial.png")

@@ -15,14 +15,13 @@ recorded as such (its message in the table) and the study goes on.
 """
 
 import sys
-import time
 
 import numpy as np
 
-from .. import units
 from ..errors import InputError
-from ..scenes.base import Param
-from .common import ListParam, format_table, markdown_table, out_folder, parse_params, run_scene, write_csv, write_json
+from ..scenes.base import Param, get_scene
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, run_scene, write_csv
 
 #: the seven named tests of issue 42 (V in m/s, L0 in mm)
 SEVEN = (("WG 275/L47", 275, 46.94), ("WG 373/L23", 373, 23.47), ("G200", 200, None), ("G358", 358, None),
@@ -64,35 +63,72 @@ def _q(res, key):
     return (None, None) if q is None else (q.value, q.reference)
 
 
-def taylor_study(overrides=None, out=None, progress=True, quiet=None):
+def _row(t, across, res, err, wall):
+    """One run's row: the measured shape against the test's."""
+    row = {"test": test_label(t), "across": int(across), "V_m_s": t["V_m_s"], "L0_mm": t["L0_mm"],
+           "wall_s": wall, "error": err}
+    if res is not None:
+        for key, name in (("Lf_over_L0", "Lf"), ("X_over_L0", "X"), ("Df_over_D0", "Df"), ("W_over_D0", "W")):
+            val, ref = _q(res, key)
+            row[f"{name}_mca"] = val
+            row[f"{name}_test"] = ref
+            row[f"{name}_err"] = None if (ref is None or val is None) else (val - ref) / ref
+        row["outline_dev"] = _q(res, "outline_deviation")[0]
+        row["residual_over_plastic"] = _q(res, "residual_over_plastic")[0]
+        row["automata"] = res.extra.get("n_clusters")
+        row["stopped"] = res.extra.get("stopped")
+    return row
+
+
+def _summary(rows):
+    ok = [r for r in rows if r.get("Lf_err") is not None]
+    return {"n_runs": len(rows), "n_failed": sum(1 for r in rows if r["error"]),
+            "Lf_within_aim": sum(1 for r in ok if abs(r["Lf_err"]) <= AIM_LF),
+            "Lf_max_abs_err": max((abs(r["Lf_err"]) for r in ok), default=None),
+            "Lf_mean_err": float(np.mean([r["Lf_err"] for r in ok])) if ok else None,
+            "Df_within_aim": sum(1 for r in rows if r.get("Df_err") is not None and abs(r["Df_err"]) <= AIM_DF),
+            "Df_measured": sum(1 for r in rows if r.get("Df_err") is not None)}
+
+
+CSV_COLUMNS = ["test", "across", "V_m_s", "L0_mm", "automata", "Lf_mca", "Lf_test", "Lf_err", "X_mca", "X_test",
+               "X_err", "Df_mca", "Df_test", "Df_err", "W_mca", "W_test", "W_err", "outline_dev",
+               "residual_over_plastic", "wall_s", "stopped", "error"]
+TABLE = [("test", "test", "s"), ("across", "across", "d"), ("Lf_mca", "Lf/L0", ".4f"),
+         ("Lf_test", "test", ".4f"), ("Lf_err", "err", "+.3f"), ("Df_mca", "Df/D0", ".3f"),
+         ("Df_test", "test", ".3f"), ("Df_err", "err", "+.3f"), ("X_mca", "X/L0", ".3f"),
+         ("W_mca", "W/D0", ".3f"), ("outline_dev", "outline", ".3f"), ("wall_s", "wall (s)", ".0f")]
+
+
+class TaylorStudy(Study):
     """``clusterdyn study mca-taylor`` (module docstring)."""
-    from ..scenes.base import get_scene
-    quiet = (not progress) if quiet is None else quiet
-    v, _ = parse_params(PARAMS, overrides, study="mca-taylor")
-    tests = select_tests(v["tests"])
-    folder = out_folder(out, "mca-taylor", f"{v['tests'].replace(',', '_').replace('/', '').replace(' ', '')}")
-    scene = get_scene("taylor")
-    stream = None if quiet else sys.stdout
-    rows = []
-    t0 = time.perf_counter()
-    for across in v["across"]:
-        for t in tests:
-            ov = {"method": "mca", "L0": f"{t['L0_mm']}mm", "D0": f"{t['D0_mm']}mm", "V": f"{t['V_m_s']}m/s",
-                  "r0": f"{t['D0_mm'] / across:.6g}mm", "wall": v["wall"]}
-            res, err, wall = run_scene(scene, ov, cache=folder / "runs")
-            row = {"test": test_label(t), "across": int(across), "V_m_s": t["V_m_s"], "L0_mm": t["L0_mm"],
-                   "wall_s": wall, "error": err}
-            if res is not None:
-                for key, name in (("Lf_over_L0", "Lf"), ("X_over_L0", "X"), ("Df_over_D0", "Df"),
-                                  ("W_over_D0", "W")):
-                    val, ref = _q(res, key)
-                    row[f"{name}_mca"] = val
-                    row[f"{name}_test"] = ref
-                    row[f"{name}_err"] = None if (ref is None or val is None) else (val - ref) / ref
-                row["outline_dev"] = _q(res, "outline_deviation")[0]
-                row["residual_over_plastic"] = _q(res, "residual_over_plastic")[0]
-                row["automata"] = res.extra.get("n_clusters")
-                row["stopped"] = res.extra.get("stopped")
+
+    name = "mca-taylor"
+    summary = ("every room-temperature 6061-T6 Taylor test with the MCA rod (Johnson-Cook, large strain): Lf/L0, "
+               "Df/D0 against the tests, error against wall time")
+    params = PARAMS
+    json_name = "result.json"
+
+    def tag(self, run):
+        return f"{run.v['tests'].replace(',', '_').replace('/', '').replace(' ', '')}"
+
+    def plan(self, run):
+        """(test, across, taylor scene overrides) of every run."""
+        v = run.v
+        plan = []
+        for across in v["across"]:
+            for t in select_tests(v["tests"]):
+                plan.append((t, across, {"method": "mca", "L0": f"{t['L0_mm']}mm", "D0": f"{t['D0_mm']}mm",
+                                         "V": f"{t['V_m_s']}m/s", "r0": f"{t['D0_mm'] / across:.6g}mm",
+                                         "wall": v["wall"]}))
+        return plan
+
+    def collect(self, run, plan):
+        scene = get_scene("taylor")
+        stream = None if run.quiet else sys.stdout
+        rows = []
+        for t, across, ov in plan:
+            res, err, wall = run_scene(scene, ov, cache=run.cache)
+            row = _row(t, across, res, err, wall)
             rows.append(row)
             if stream:
                 e = row.get("Lf_err")
@@ -100,31 +136,21 @@ def taylor_study(overrides=None, out=None, progress=True, quiet=None):
                       f"{row.get('Lf_mca') if row.get('Lf_mca') is None else round(row['Lf_mca'], 4)} vs "
                       f"{row.get('Lf_test')} ({'-' if e is None else f'{100 * e:+.1f}%'}), {wall:.0f} s"
                       + (f"  {err}" if err else ""), file=stream, flush=True)
-    cols = ["test", "across", "V_m_s", "L0_mm", "automata", "Lf_mca", "Lf_test", "Lf_err", "X_mca", "X_test",
-            "X_err", "Df_mca", "Df_test", "Df_err", "W_mca", "W_test", "W_err", "outline_dev",
-            "residual_over_plastic", "wall_s", "stopped", "error"]
-    write_csv(folder / "mca_taylor.csv", rows, cols)
-    table = [("test", "test", "s"), ("across", "across", "d"), ("Lf_mca", "Lf/L0", ".4f"),
-             ("Lf_test", "test", ".4f"), ("Lf_err", "err", "+.3f"), ("Df_mca", "Df/D0", ".3f"),
-             ("Df_test", "test", ".3f"), ("Df_err", "err", "+.3f"), ("X_mca", "X/L0", ".3f"),
-             ("W_mca", "W/D0", ".3f"), ("outline_dev", "outline", ".3f"), ("wall_s", "wall (s)", ".0f")]
-    text = format_table(rows, table, title="MCA Taylor rods (Johnson-Cook 6061-T6) against the tests")
-    if stream:
-        print(text, file=stream)
-    (folder / "mca_taylor.md").write_text(markdown_table(rows, table) + "\n")
-    png = plot_taylor(rows, folder / "mca_taylor.png")
-    ok = [r for r in rows if r.get("Lf_err") is not None]
-    summary = {"n_runs": len(rows), "n_failed": sum(1 for r in rows if r["error"]),
-               "Lf_within_aim": sum(1 for r in ok if abs(r["Lf_err"]) <= AIM_LF),
-               "Lf_max_abs_err": max((abs(r["Lf_err"]) for r in ok), default=None),
-               "Lf_mean_err": float(np.mean([r["Lf_err"] for r in ok])) if ok else None,
-               "Df_within_aim": sum(1 for r in rows if r.get("Df_err") is not None and abs(r["Df_err"]) <= AIM_DF),
-               "Df_measured": sum(1 for r in rows if r.get("Df_err") is not None)}
-    res = {"study": "mca-taylor", "rows": rows, "summary": summary, "aims": {"Lf": AIM_LF, "Df": AIM_DF},
-           "files": [str(folder / "mca_taylor.csv"), str(folder / "mca_taylor.md"), str(png)],
-           "wall_time_s": time.perf_counter() - t0}
-    write_json(folder / "result.json", res)
-    return res
+        return rows
+
+    def report(self, run, rows):
+        folder = run.folder
+        write_csv(folder / "mca_taylor.csv", rows, CSV_COLUMNS)
+        text = format_table(rows, TABLE, title="MCA Taylor rods (Johnson-Cook 6061-T6) against the tests")
+        (folder / "mca_taylor.md").write_text(markdown_table(rows, TABLE) + "\n")
+        png = plot_taylor(rows, folder / "mca_taylor.png")
+        files = [folder / "mca_taylor.csv", folder / "mca_taylor.md", png]
+        res = {"study": "mca-taylor", "rows": rows, "summary": _summary(rows), "aims": {"Lf": AIM_LF, "Df": AIM_DF},
+               "files": [str(f) for f in files]}
+        return Report(res, [text], files)
+
+
+taylor_study = register_study(TaylorStudy())
 
 
 def plot_taylor(rows, path):

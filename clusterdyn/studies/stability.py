@@ -34,21 +34,21 @@ is the shock scene's (:func:`clusterdyn.scenes.shock.shock_timestep`:
 """
 
 import math
-import time
 
 import numpy as np
 
 from .. import units
 from ..build import fcc_packing
 from ..calculators import ClusterDynamics
+from ..analysis.energy_balance import EnergyBalance
 from ..errors import InputError, InstabilityError
 from ..md import DampedVerlet, stability_limit
 from ..md.damped import TIMESTEP_FACTOR
 from ..scenes.base import Param
 from ..scenes.common import thermal_noise
 from ..scenes.shock import CD_MATERIALS, build_shock, shock_timestep
-from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar, write_csv,
-                     write_json)
+from .base import Report, Study, register_study
+from .common import ListParam, format_table, markdown_table, write_csv
 
 PARAMS = [
     Param("material", "Al", "material", kind="choice", choices=CD_MATERIALS),
@@ -73,39 +73,6 @@ COLUMNS = [("u", "u km/s", ".3g"), ("dt_default", "dt default", ".4f"), ("dt_lim
            ("err_default", "E err default", ".2e"), ("default_ok", "default ok", ""),
            ("min_r", "min r/r0", ".3f"), ("dt_check", "check predicts", ".4f"),
            ("dt_rest", "2/w_max rest", ".4f"), ("stopped_by", "first failure", ""), ("n_runs", "runs", "d")]
-
-
-class EnergyBalance:
-    """Observer: energy error ``E - E(0) - W`` after every step (attach with interval 1).
-
-    ``W`` is the work the pistons have done on the sample since the first
-    call (:attr:`clusterdyn.md.Piston.work`, the trapezoid integral of
-    ``-force . U`` over the steps); constant-velocity pistons keep their own
-    kinetic energy, so ``E - E(0) - W`` is the integrator's error.
-    """
-
-    def __init__(self, dyn, atoms, pistons):
-        self.dyn, self.atoms, self.pistons = dyn, atoms, pistons
-        self.E0 = None
-        self.W0 = 0.0
-        self.errors = []
-        self.min_r = math.inf
-
-    @property
-    def W(self):
-        """Work of the pistons since the first call, eV."""
-        return sum(p.work for p in self.pistons) - self.W0
-
-    def __call__(self):
-        dyn = self.dyn
-        E = dyn.get_total_energy()
-        W = sum(p.work for p in self.pistons)
-        if self.E0 is None:
-            self.E0, self.W0 = E, W
-        self.errors.append(E - self.E0 - (W - self.W0))
-        st = dyn.calc.last_stats
-        if st is not None:
-            self.min_r = min(self.min_r, st["min_r_over_r0"])
 
 
 def _run(material, u, dt, v, rest_duration=None):
@@ -253,48 +220,60 @@ def _check_sizes(v):
                          "periodic block 2 rc r0 wide)")
 
 
-def stability_study(overrides=None, out=None, progress=True, quiet=None):
-    """Run the stability study (see the module docstring); returns a JSON-ready dict."""
-    t_start = time.perf_counter()
-    quiet = (not progress) if quiet is None else quiet
-    v, _ = parse_params(PARAMS, overrides, study="stability")
-    _check_sizes(v)
-    mat = v["material"]
-    folder = out_folder(out, "stability", mat)
-    bar = progress_bar(len(v["u"]), f"stability {mat}", progress)
-    rows = []
-    for u in v["u"]:
+class StabilityStudy(Study):
+    """The measured time-step limit against u (module docstring)."""
+
+    name = "stability"
+    summary = "the measured time-step limit (bounded energy error) against u"
+    params = PARAMS
+    json_name = "stability.json"
+
+    def tag(self, run):
+        return run.v["material"]
+
+    def prepare(self, run):
+        _check_sizes(run.v)
+
+    def plan(self, run):
+        return list(run.v["u"])
+
+    def collect(self, run, plan):
+        mat = run.v["material"]
+        bar = run.bar(len(plan), f"stability {mat}")
+        rows = []
+        for u in plan:
+            if bar is not None:
+                bar.set_postfix_str(f"u={u:g} km/s")
+            rows.append(find_limit(mat, u * units.km_s, run.v))
+            if bar is not None:
+                bar.update(1)
         if bar is not None:
-            bar.set_postfix_str(f"u={u:g} km/s")
-        rows.append(find_limit(mat, u * units.km_s, v))
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    lim = [r["dt_limit"] for r in rows if np.isfinite(r["dt_limit"])]
-    text = [format_table(rows, COLUMNS, f"time-step limit of {mat} (rc = {v['rc']:g}, attraction = "
-                                        f"{v['attraction']}); time steps in r0/c0; bounded = no instability "
-                                        f"and energy error < {v['energy_tol']:g}")]
-    for r in rows:
-        if not np.isfinite(r["dt_limit"]):
-            kinds = {x["stopped_by"] for x in r["scan"]}
-            text.append(f"u = {r['u']:g} km/s: no bounded time step down to 1/64 of the default; every run "
-                        f"stopped ({'; '.join(sorted(k for k in kinds if k))}): compression beyond the "
-                        "potential's range, not a time-step limit")
-    if lim:
-        text.append(f"smallest margin of the default time step below the measured limit: "
-                    f"{min(r['margin'] for r in rows if np.isfinite(r['margin'])):.1f}x")
-    files = [write_csv(folder / "stability.csv", [{k: x for k, x in r.items() if k != "scan"} for r in rows])]
-    if v["plots"]:
-        files.append(_plot(folder / "stability.png", rows, mat))
-    result = {"study": "stability", "material": mat, "rows": rows, "markdown": markdown_table(rows, COLUMNS),
-              "wall_time_s": time.perf_counter() - t_start}
-    files.append(write_json(folder / "stability.json", result))
-    result["files"] = [str(f) for f in files]
-    text.append("wrote " + ", ".join(str(f) for f in files))
-    if not quiet:
-        print("\n\n".join(text))
-    return result
+            bar.close()
+        return rows
+
+    def report(self, run, rows):
+        v, mat = run.v, run.v["material"]
+        lim = [r["dt_limit"] for r in rows if np.isfinite(r["dt_limit"])]
+        text = [format_table(rows, COLUMNS, f"time-step limit of {mat} (rc = {v['rc']:g}, attraction = "
+                                            f"{v['attraction']}); time steps in r0/c0; bounded = no instability "
+                                            f"and energy error < {v['energy_tol']:g}")]
+        for r in rows:
+            if not np.isfinite(r["dt_limit"]):
+                kinds = {x["stopped_by"] for x in r["scan"]}
+                text.append(f"u = {r['u']:g} km/s: no bounded time step down to 1/64 of the default; every run "
+                            f"stopped ({'; '.join(sorted(k for k in kinds if k))}): compression beyond the "
+                            "potential's range, not a time-step limit")
+        if lim:
+            text.append(f"smallest margin of the default time step below the measured limit: "
+                        f"{min(r['margin'] for r in rows if np.isfinite(r['margin'])):.1f}x")
+        files = [write_csv(run.folder / "stability.csv", [{k: x for k, x in r.items() if k != "scan"} for r in rows])]
+        if v["plots"]:
+            files.append(_plot(run.folder / "stability.png", rows, mat))
+        result = {"study": "stability", "material": mat, "rows": rows, "markdown": markdown_table(rows, COLUMNS)}
+        return Report(result, text, files)
+
+
+stability_study = register_study(StabilityStudy())
 
 
 def _plot(path, rows, mat):

@@ -1,6 +1,6 @@
 import pytest
 
-from clusterdyn.studies.mca import elastic_material
+from clusterdyn.analysis.mca_elastic import elastic_material
 
 
 @pytest.fixture

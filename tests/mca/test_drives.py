@@ -13,7 +13,8 @@ from clusterdyn.mca.dynamics import MCADynamics, wave_speeds
 from clusterdyn.mca.state import ATOM_ARRAYS, PAIR_ARRAYS
 from clusterdyn.md import Piston, Traction
 from clusterdyn.scenes.mca_experiments import build_uniaxial
-from clusterdyn.studies.mca import elastic_material, load_unload_reload
+from clusterdyn.analysis.mca_elastic import elastic_material
+from clusterdyn.scenes.mca_material_point import load_unload_reload
 
 ALUMINA = get_material("alumina")
 

@@ -5,7 +5,7 @@ The full 20-case table: ``python -m clusterdyn.mca.studies elasticity`` (docs/mc
 
 import pytest
 
-from clusterdyn.studies.mca import elastic_case, _err
+from clusterdyn.analysis.mca_elastic import elastic_case, relative_errors
 
 CASES = [("fcc", 0.25), ("hcp", 0.45), ("sc", 0.0), ("random", 0.35), ("fcc", 0.45), ("sc", 0.15)]
 
@@ -13,7 +13,7 @@ CASES = [("fcc", 0.25), ("hcp", 0.45), ("sc", 0.0), ("random", 0.35), ("fcc", 0.
 @pytest.mark.parametrize("packing,nu", CASES)
 def test_elastic_constants(packing, nu):
     row = elastic_case(nu, packing)
-    err = _err(row)
+    err = relative_errors(row)
     tol = 0.10 if packing == "random" else 0.05
     if nu == 0.0:
         assert abs(err["nu"]) < 0.02, row

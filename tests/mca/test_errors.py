@@ -9,7 +9,7 @@ from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics, default_timestep
 from clusterdyn.materials.mca import mca_material
-from clusterdyn.studies.mca import elastic_material
+from clusterdyn.analysis.mca_elastic import elastic_material
 
 
 def test_library_through_get_material():

@@ -147,7 +147,7 @@ def test_mca_wall_defaults_frictionless_and_sticking():
 
 
 def test_compression_flow_tiny():
-    from clusterdyn.studies.mca_flow import compression_flow
+    from clusterdyn.scenes.mca_material_point import compression_flow
     r = compression_flow(5, strain=0.3, transits=10)
     assert r["remeshes"] >= 2
     assert r["momentum_rel"] < 1e-12

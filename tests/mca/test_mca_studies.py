@@ -9,8 +9,8 @@ import pytest
 
 from clusterdyn import units
 from clusterdyn.materials import get_material
-from clusterdyn.studies.mca import (cd_elastic_constants, cubic_stiffness, degrading_cycle,
-                                    rotate_stiffness, uniaxial_moduli)
+from clusterdyn.analysis.elastic import cd_elastic_constants, cubic_stiffness, rotate_stiffness, uniaxial_moduli
+from clusterdyn.scenes.mca_material_point import degrading_cycle
 
 
 def test_cd_contrast_100_cauchy_poisson_ratio_and_bulk_modulus():

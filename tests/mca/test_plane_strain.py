@@ -6,7 +6,7 @@ import pytest
 from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics
-from clusterdyn.studies.mca import elastic_material
+from clusterdyn.analysis.mca_elastic import elastic_material
 
 
 @pytest.mark.parametrize("packing", ["hex", "sc", "random"])

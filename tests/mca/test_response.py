@@ -5,7 +5,7 @@ import numpy as np
 from clusterdyn.materials import get_material
 from clusterdyn.build.mca import precrack
 from clusterdyn.scenes.mca_experiments import uniaxial
-from clusterdyn.studies.mca import load_unload_reload
+from clusterdyn.scenes.mca_material_point import load_unload_reload
 
 
 def test_elastic_plastic_plateau_and_residual_strain():

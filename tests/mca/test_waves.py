@@ -7,7 +7,7 @@ from scipy.special import erf
 from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics, wave_speeds
-from clusterdyn.studies.mca import elastic_material
+from clusterdyn.analysis.mca_elastic import elastic_material
 
 
 def pulse_speed(packing, mode, nu=0.25, L=40.0, w=5.0):

@@ -8,7 +8,7 @@ from clusterdyn import units
 from clusterdyn.build.polycrystal import PACKINGS, packing_spec
 from clusterdyn.errors import InputError
 from clusterdyn.studies.calibrate import calibrate_study, g_c_for
-from clusterdyn.studies.flow_stress import material_point
+from clusterdyn.scenes.material_point import material_point
 
 TINY = dict(material="Al-6061-T6", size=8.0, grain_size=4.0, porosity=0.14, seed=1, relax_cycles=2,
             strains=(0.01, 0.015), hold=0.5, average=0.5)

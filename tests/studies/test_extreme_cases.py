@@ -18,7 +18,7 @@ from clusterdyn.md import DampedVerlet, default_timestep, stability_limit
 from clusterdyn.potentials import R_MIN_FACTOR
 from clusterdyn.scenes.common import thermal_noise
 from clusterdyn.scenes.shock import build_shock, run_shock
-from clusterdyn.studies.stability import EnergyBalance
+from clusterdyn.analysis.energy_balance import EnergyBalance
 
 R0 = 5 * units.um
 

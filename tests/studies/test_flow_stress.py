@@ -1,4 +1,4 @@
-"""The flow-stress study: the material-point test against the Cauchy lattice, refusals, resume."""
+"""The flow-stress study: refusals, the plan, resume and advice (the material point itself: tests/scenes)."""
 
 import math
 
@@ -6,36 +6,16 @@ import numpy as np
 import pytest
 
 from clusterdyn import units
-from clusterdyn.build.lattice import SQRT2
 from clusterdyn.calculators import ClusterDynamics
-from clusterdyn.build import fcc_packing
 from clusterdyn.errors import InputError
 from clusterdyn.studies import get_study, study_params
 from clusterdyn.studies import flow_stress as fs
+from clusterdyn.studies.common import parse_params
 
 #: a study that runs in about a second: an 8 r0 cube of 4 r0 grains, 2% strain
 TINY = {"size": "8", "grain_size": "4", "porosity": "0.2", "grain_sizes": "4", "porosities": "0.2", "rcs": "1.15",
         "boundary_kinds": "bonded", "rates": "0.01", "rate": "0.01", "strains": "0.01,0.02", "hold": "2",
         "average": "1", "seeds": "2", "relax_cycles": "2", "plots": "false"}
-
-
-@pytest.mark.parametrize("eps", [0.002, 0.004])
-def test_single_crystal_is_the_cauchy_lattice(eps):
-    """Uniaxial strain of a [100] crystal: -s_xx = C11 eps, -s_yy = C12 eps, s_u = (C11 - C12) eps."""
-    r = fs.material_point(sample="single", size=4.0, r0=10 * units.um, strains=(eps,), rate=1e-3, hold=2.0,
-                          average=1.0, noise=0.0)
-    calc = ClusterDynamics()
-    calc.setup(fcc_packing("Al", 10 * units.um, size=(2, 2, 2), pbc=True))
-    pot = calc.potentials[0]
-    k = float(pot.stiffness(pot.r0))
-    a = SQRT2 * pot.r0
-    C11, C12 = 2 * k / a / units.GPa, k / a / units.GPa
-    rel = r["relaxed"]
-    assert rel["sigma_axial"] == pytest.approx(C11 * eps, rel=0.02)
-    assert rel["sigma_lateral"] == pytest.approx(C12 * eps, rel=0.03)
-    assert r["flow_stress"] == pytest.approx((C11 - C12) * eps, rel=0.03)
-    assert r["curve"][0]["sigma_u"] == pytest.approx((C11 - C12) * eps, rel=0.03)
-    assert r["n_clusters"] == 4 * 3 ** 3
 
 
 def test_refusals():
@@ -49,16 +29,10 @@ def test_refusals():
     for ov, match in bad:
         with pytest.raises(InputError, match=match):
             study(ov, out=None, progress=False)
-    with pytest.raises(InputError, match="strains="):
-        fs.material_point(strains=(0.1, 0.05))
-    with pytest.raises(InputError, match="boundaries="):
-        fs.material_point(boundaries="glued")
-    with pytest.raises(InputError, match="grain_size="):
-        fs.material_point(size=8.0, grain_size=10.0)
 
 
 def test_plan_one_factor_and_grid():
-    v, _ = fs.parse_params(fs.PARAMS, {}, study="flow-stress")
+    v, _ = parse_params(fs.PARAMS, {}, study="flow-stress")
     points = fs.plan_points(v, ("bonded", "repulsive"))
     assert points[0][0] == ["boundaries", "default", "grain_size", "grid", "porosity", "rate", "rc"]
     # 4 x 4 grid (holding the grain and porosity lines), 2 more cutoffs, repulsive, 2 more rates
@@ -97,7 +71,7 @@ def test_resume_and_advice(tmp_path, capsys):
 
 
 def test_advice_when_no_packing_reaches_the_target():
-    v, _ = fs.parse_params(fs.PARAMS, {"grain_sizes": "5,11", "porosities": "0.14,0.2", "rcs": "1.1,1.15",
+    v, _ = parse_params(fs.PARAMS, {"grain_sizes": "5,11", "porosities": "0.14,0.2", "rcs": "1.1,1.15",
                                        "boundary_kinds": "bonded", "rates": "0.001", "grid": "false"})
 
     def row(sweeps, g, p, rc, flow):
