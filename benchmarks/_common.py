@@ -21,9 +21,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from clusterdyn.parallel import configure_openmp
+try:
+    from clusterdyn.parallel import configure_openmp
+except ImportError:         # an older checkout (lammps_tune.py --against) sets it when imported
+    configure_openmp = None
 
-configure_openmp()          # the CLI's OpenMP waiting, before any kernel runs (clusterdyn.parallel)
+if configure_openmp is not None:
+    configure_openmp()      # the CLI's OpenMP waiting, before any kernel runs (clusterdyn.parallel)
 
 HERE = Path(__file__).resolve().parent
 #: per-run output of every script (not in git)

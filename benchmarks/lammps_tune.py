@@ -2,6 +2,8 @@
 
     python benchmarks/lammps_tune.py                          # 128k and 512k clusters, about 30-90 min
     python benchmarks/lammps_tune.py --sizes 32 --steps 60 --repeat 1 --quick
+    python benchmarks/lammps_tune.py --sizes 128 --repeat 5 --max-threads 1 --eff-rounds 0 \
+        --winner "spline,2000,0.3,every 5 delay 0 check yes,omp" --against /path/to/older/checkout
 
 The scene is the aluminium piston shock (``build_shock``, [100], u = 3 km/s, 10
 m/s noise, cross-section 16 x 16 cells, N = 1024 x length), taken from the saved
@@ -37,6 +39,15 @@ same positions and velocities.
    one process (``--worker cd-eff``): windows of half the steps on 1, 2, 2 and 1
    threads in turn, ``--eff-rounds`` times, so that both counts run in the same
    spell of a shared machine's load.
+
+3. **Against another checkout** (``--against TREE``): each repeat also times clusterdyn of TREE
+   (its worker imports ``clusterdyn`` from TREE through ``PYTHONPATH``; the saved state, this
+   script and ``_common.py`` are shared), the two checkouts in alternating order (this one first
+   in even repeats), then LAMMPS.  The statistic, fixed before the run: per repeat the ratios
+   this/TREE, this/LAMMPS and TREE/LAMMPS of the particle-steps/s of the repeat's windows; their
+   median over the repeats and their range (and the median and range of each rate).
+   ``--winner STYLE,POINTS,SKIN_R0,NEIGH_MODIFY,SUFFIX`` skips the tuning and races that
+   LAMMPS configuration (its force error on the state is still measured).
 
 The machine may be shared: the load average is recorded beside every run.
 Results: ``benchmarks/results/lammps_tune.md`` and ``.json`` (not in git; headline figures in
@@ -198,11 +209,13 @@ def lammps_rate(folder, procs):
             "memory_mb_total": r.memory_mb_total, "load": os.getloadavg()[0]}
 
 
-def _worker(kind, state, J, *args):
-    """Run this script's ``--worker kind`` on the saved state; its JSON line, with the load average."""
+def _worker(kind, state, J, *args, tree=None):
+    """Run this script's ``--worker kind`` on the saved state (with ``clusterdyn`` imported from the
+    checkout ``tree`` when given); its JSON line, with the load average."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", kind, "--state", str(state), "--J", J,
            *map(str, args)]
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200)
+    env = None if tree is None else {**os.environ, "PYTHONPATH": str(tree)}
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=7200, env=env)
     if p.returncode != 0:
         raise RuntimeError(p.stderr[-3000:])
     r = json.loads(p.stdout.strip().split("\n")[-1])
@@ -210,8 +223,9 @@ def _worker(kind, state, J, *args):
     return r
 
 
-def _run_cd(state, J, threads, steps, sort_interval=0):
-    return _worker("cd", state, J, "--threads", threads, "--steps", steps, "--sort-interval", sort_interval)
+def _run_cd(state, J, threads, steps, sort_interval=0, tree=None):
+    return _worker("cd", state, J, "--threads", threads, "--steps", steps, "--sort-interval", sort_interval,
+                   tree=tree)
 
 
 def _run_cd_eff(state, J, window, rounds):
@@ -293,10 +307,33 @@ def tune(nx, state, steps, tol, tmp, quick=False, log=print):
             "calc": calc, "r0": r0}
 
 
-def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print, eff_rounds=2):
+def fixed_winner(nx, state, steps, spec, tmp, log=print):
+    """The tuning's record for a LAMMPS configuration given as ``STYLE,POINTS,SKIN_R0,NEIGH,SUFFIX``
+    (``--winner``): its force error on the state and one timed run."""
+    style, npts, skin, neigh, suffix = [x.strip() for x in spec.split(",")]
+    npts, skin = int(npts), float(skin)
+    base, f_cd, r0, calc = export_base(state, None, tmp / f"base_{nx}", steps)
+    tables = {}
+    ff = variant(base, tmp / f"f_{nx}_win", calc, style, npts, calc.nl.skin, DEFAULT_NEIGH, force_run=True,
+                 tables=tables, suffix=suffix)
+    err = force_error(ff, f_cd)
+    r = lammps_rate(variant(base, tmp / f"t_{nx}_win", calc, style, npts, skin * r0, neigh, tables=tables,
+                            suffix=suffix), 1)
+    row = {"N": r["N"], "style": style, "points": npts, "skin_r0": skin, "neigh_modify": neigh, "suffix": suffix,
+           "force_error": err, "rate": r["rate"], "builds": r["builds"], "dangerous": r["dangerous"],
+           "steps": r["steps"], "load": r["load"], "timing": r["timing"], "eligible": r["dangerous"] == 0}
+    log(f"  N={r['N']} given: table {style} {npts}/{suffix}, skin {skin:g} r0, {neigh}: {r['rate']:.3g} "
+        f"particle-steps/s, force error {err:.1e}, dangerous {r['dangerous']}")
+    return {"rows": [row], "winner": row, "cd_skin_r0": calc.nl.skin / r0, "base": str(base), "tables": tables,
+            "calc": calc, "r0": r0}
+
+
+def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print, eff_rounds=2, against=None):
     """clusterdyn against the winner, damping off and J = 50, 1 and 2 threads/ranks, repeats interleaved;
     with two threads, also clusterdyn's efficiency with the counts alternating in one process
-    (:func:`worker_cd_eff`, ``eff_rounds`` rounds of windows of ``steps // 2`` steps a repeat)."""
+    (:func:`worker_cd_eff`, ``eff_rounds`` rounds of windows of ``steps // 2`` steps a repeat);
+    ``against``: another checkout's clusterdyn too (engine ``clusterdyn-against``), the two in
+    alternating order."""
     calc, r0 = tun["calc"], tun["r0"]
     decks = {}
     base_off = Path(tun["base"])
@@ -309,11 +346,13 @@ def race(nx, state, steps, win, tun, tmp, repeat, threads, log=print, eff_rounds
     for rep in range(repeat):
         for J in ("none", "50"):
             for t in threads:
-                r = _run_cd(state, J, t, steps)
-                r["repeat"] = rep
-                runs.append(r)
-                log(f"  [{rep}] clusterdyn N={r['N']} J={J} threads={t}: {r['rate']:.3g} particle-steps/s, "
-                    f"{r['builds']} builds, {r['peak_bytes_per_particle']:.0f} B/particle, load {r['load']:.1f}")
+                trees = [("clusterdyn", None)] + ([("clusterdyn-against", against)] if against else [])
+                for eng, tree in (trees if rep % 2 == 0 else trees[::-1]):
+                    r = _run_cd(state, J, t, steps, tree=tree)
+                    r.update({"repeat": rep, "engine": eng})
+                    runs.append(r)
+                    log(f"  [{rep}] {eng} N={r['N']} J={J} threads={t}: {r['rate']:.3g} particle-steps/s, "
+                        f"{r['builds']} builds, {r['peak_bytes_per_particle']:.0f} B/particle, load {r['load']:.1f}")
             for p in threads:
                 r = lammps_rate(decks[J], p)
                 r.update({"J": None if J == "none" else 50.0, "repeat": rep})
@@ -348,6 +387,34 @@ def summarise(runs, threads):
     return out
 
 
+def against_lines(rep, s, N):
+    """The race of two checkouts (``--against``): per-repeat rates and ratios, median and range."""
+    def mr(v, f):
+        return f"{f(median(v))} ({f(min(v))}-{f(max(v))})"
+    runs = [r for size in rep["sizes"] for r in size["runs"] if r.get("N") == N]
+    L = [f"## N = {N}: this checkout against {rep['meta']['against']}", "",
+         "Median of the per-repeat values over the repeats, range in brackets; a repeat's windows are "
+         "interleaved (the two checkouts alternate in order, then LAMMPS). CPU: clusterdyn's rate in process "
+         "CPU time.", "",
+         "| damping | threads | this | against | LAMMPS | this / against | this / LAMMPS | against / LAMMPS "
+         "| CPU this / against |", "|---|---|---|---|---|---|---|---|---|"]
+    for J in (None, 50.0):
+        for t_ in rep["threads"]:
+            a, b, c = (s.get((eng, N, J, t_)) for eng in ("clusterdyn", "clusterdyn-against", "LAMMPS"))
+            if not (a and b and c):
+                continue
+            ks = [k for k in a["by_repeat"] if k in b["by_repeat"] and k in c["by_repeat"]]
+            cpu = {(r["engine"], r["repeat"]): r["N"] * r["steps"] / r["cpu_s"] for r in runs
+                   if r["engine"] in ("clusterdyn", "clusterdyn-against") and r["J"] == J and r["threads"] == t_}
+            L.append(f"| {'off' if J is None else 'J = 50'} | {t_} | "
+                     + " | ".join(mr([x["by_repeat"][k] for k in ks], lambda v: f"{v:.3g}") for x in (a, b, c))
+                     + " | " + " | ".join(mr([x["by_repeat"][k] / y["by_repeat"][k] for k in ks], lambda v: f"{v:.3f}")
+                                          for x, y in ((a, b), (a, c), (b, c)))
+                     + " | " + mr([cpu[("clusterdyn", k)] / cpu[("clusterdyn-against", k)] for k in ks],
+                                  lambda v: f"{v:.3f}") + " |")
+    return L + [""]
+
+
 def markdown(rep):
     m = rep["meta"]
     L = ["# A fair race: clusterdyn against LAMMPS tuned for speed", "",
@@ -378,13 +445,13 @@ def markdown(rep):
               "| damping | engine | threads / ranks | particle-steps/s | clusterdyn / LAMMPS-best | load | all repeats |",
               "|---|---|---|---|---|---|---|"]
         for J in (None, 50.0):
-            for eng in ("clusterdyn", "LAMMPS"):
+            for eng in ("clusterdyn", "clusterdyn-against", "LAMMPS"):
                 for t_ in rep["threads"]:
                     e = s.get((eng, N, J, t_))
                     if not e:
                         continue
                     ratio = ""
-                    if eng == "clusterdyn":
+                    if eng.startswith("clusterdyn"):
                         l = s.get(("LAMMPS", N, J, t_))
                         if l:
                             ratio = f"**{e['best'] / l['best']:.2f}**"
@@ -413,6 +480,8 @@ def markdown(rep):
                 L.append(f"- clusterdyn / LAMMPS-best, one core, damping {tag}: per repeat "
                          f"{', '.join(f'{x:.2f}' for x in per)}, median {median(per):.2f}")
         L.append("")
+        if rep["meta"].get("against"):
+            L += against_lines(rep, s, N)
     return "\n".join(L) + "\n"
 
 
@@ -436,6 +505,9 @@ def main(argv=None):
     ap.add_argument("--max-threads", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="fewer configurations (a check of the script)")
     ap.add_argument("--out", default=str(RESULTS / "lammps_tune"))
+    ap.add_argument("--against", default=None, help="another checkout whose clusterdyn races too, interleaved")
+    ap.add_argument("--winner", default=None,
+                    help="STYLE,POINTS,SKIN_R0,NEIGH_MODIFY,SUFFIX: race this LAMMPS configuration, no tuning")
     a = ap.parse_args(argv)
     if a.worker == "cd":
         return worker_cd(a)
@@ -447,6 +519,16 @@ def main(argv=None):
     meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "cpus": os.cpu_count(), "load_start": os.getloadavg(),
             "steps": a.steps, "fraction": a.fraction, "tol": a.tol, "lammps": getattr(lammps, "__version__", "?"),
             "numba": numba.__version__}
+    if a.against:
+        other = Path(a.against).resolve()
+        if not (other / "clusterdyn" / "__init__.py").exists():
+            raise SystemExit(f"--against = {a.against}: not a clusterdyn checkout (no clusterdyn/__init__.py)")
+        head = subprocess.run(["git", "-C", str(other), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True).stdout.strip()
+        meta["against"] = f"{other} ({head or 'no git'})"
+    mine = subprocess.run(["git", "-C", str(HERE), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+    meta["this"] = mine
     tmp = Path(tempfile.mkdtemp(prefix="cd_tune_"))
     sizes = []
     for k in [int(x) for x in a.sizes.split(",")]:
@@ -454,12 +536,15 @@ def main(argv=None):
         print(f"N = {k}k: state with {a.fraction:.0%} shocked", flush=True)
         state = shock_state(nx, a.fraction)
         print("tuning LAMMPS", flush=True)
-        tun = tune(nx, state, a.steps, a.tol, tmp, quick=a.quick, log=lambda s: print(s, flush=True))
+        if a.winner:
+            tun = fixed_winner(nx, state, a.steps, a.winner, tmp, log=lambda s: print(s, flush=True))
+        else:
+            tun = tune(nx, state, a.steps, a.tol, tmp, quick=a.quick, log=lambda s: print(s, flush=True))
         w = tun["winner"]
         print(f"winner: table {w['style']} {w['points']}, skin {w['skin_r0']:g} r0, {w['neigh_modify']}, "
               f"suffix {w['suffix'] or 'none'}", flush=True)
         runs = race(nx, state, a.steps, w, tun, tmp, a.repeat, threads, log=lambda s: print(s, flush=True),
-                    eff_rounds=a.eff_rounds)
+                    eff_rounds=a.eff_rounds, against=Path(a.against).resolve() if a.against else None)
         summ = summarise(runs, threads)
         sizes.append({"tuning": {k_: v for k_, v in tun.items() if k_ not in ("calc", "tables")},
                       "runs": runs, "summary": summ})

@@ -320,6 +320,53 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
     d_min = check_positive("d_min", d_min)
     if not D_MIN_RANGE[0] <= d_min <= D_MIN_RANGE[1]:
         raise InputError("d_min", d_min, f"a distance in [{D_MIN_RANGE[0]}, {D_MIN_RANGE[1]}] r0")
+    n_grains, seeds = _grain_count(r0, vol, n_grains, grain_size, seeds)
+
+    rng = np.random.default_rng(seed)
+    if seeds is None:
+        seeds = _random_seeds(rng, shape, n_grains)
+    lo, hi = shape.bounds()
+    if np.any(seeds < lo) or np.any(seeds >= hi):
+        raise InputError("seeds", "points outside the shape's bounds", f"points in [{lo.tolist()}, {hi.tolist()})")
+    rots = (_rotation_matrices(rotations, n_grains) if rotations is not None
+            else Rotation.random(n_grains, rng=rng).as_matrix().reshape(n_grains, 3, 3))
+    pos, grain = _grain_sites(r0, shape, pbc, seeds, rots)
+    n_sites = len(pos)
+    removed, d_min = _boundary_removal(pos, grain, shape, pbc, r0, d_min, target_porosity, porosity_tol)
+    target_porosity = None if target_porosity is None else float(target_porosity)
+    pos, grain = pos[~removed], grain[~removed]
+    if len(pos) == 0:
+        raise InputError("shape", shape, f"a shape that holds at least one cluster of r0={r0:.4g} A")
+    r_near = _nearest_distance(pos, lo, hi, pbc) / r0
+
+    cell = np.diag(hi - lo)
+    atoms = make_cluster_atoms(pos, [mat], [r0], cell=cell, pbc=pbc)
+    if isinstance(shape, Box) and np.any(lo != 0):
+        atoms.info["origin"] = lo.tolist()
+    atoms.new_array("grain", grain)
+    atoms.info["grain_rotations"] = rots
+    atoms.info["grain_seeds"] = seeds
+    porosity = 1.0 - len(pos) * (r0 ** 3 / SQRT2) / vol
+    report = {"porosity": porosity,
+              "density_g_cm3": mat.rho0 * (1.0 - porosity) / units.g_cm3,
+              "d_min_r0": float(d_min),
+              "target_porosity": target_porosity,
+              "n_sites_before_removal": int(n_sites),
+              "n_removed": int(n_sites - len(pos)),
+              "n_clusters": int(len(pos)),
+              "nearest_distance_r0": r_near,
+              "n_seeds": n_grains,
+              "shape_volume_A3": vol,
+              "pbc": pbc.tolist()}
+    report.update(grain_statistics(atoms, r0))
+    report["build_time_s"] = time.perf_counter() - t0
+    atoms.info["polycrystal"] = report
+    return atoms
+
+
+def _grain_count(r0, vol, n_grains, grain_size, seeds):
+    """The number of grains from exactly one of ``n_grains``, ``grain_size`` or ``seeds`` (checked
+    against the shape's volume ``vol``): returns (n_grains, seeds as an array or None)."""
     given = [x is not None for x in (n_grains, grain_size, seeds)]
     if sum(given) != 1 and not (seeds is not None and n_grains is not None and sum(given) == 2):
         raise InputError("n_grains", n_grains, "exactly one of n_grains, grain_size or seeds")
@@ -349,17 +396,13 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
         raise InputError("n_grains", n_grains,
                          f"at most {int(vol / (math.pi / 6 * (MIN_GRAIN_SIZE * r0) ** 3))} grains in this shape",
                          hint=f"mean grain diameter would be {d_equiv / r0:.3g} r0 < {MIN_GRAIN_SIZE:g} r0")
+    return n_grains, seeds
 
-    rng = np.random.default_rng(seed)
-    if seeds is None:
-        seeds = _random_seeds(rng, shape, n_grains)
+
+def _grain_sites(r0, shape, pbc, seeds, rots):
+    """The fcc sites of every grain within the shape, sorted by grain then position: (pos, grain)."""
     lo, hi = shape.bounds()
-    if np.any(seeds < lo) or np.any(seeds >= hi):
-        raise InputError("seeds", "points outside the shape's bounds", f"points in [{lo.tolist()}, {hi.tolist()})")
-    rots = (_rotation_matrices(rotations, n_grains) if rotations is not None
-            else Rotation.random(n_grains, rng=rng).as_matrix().reshape(n_grains, 3, 3))
-
-    if n_grains == 1:
+    if len(seeds) == 1:
         cells = [(lo, hi, np.zeros((0, 3)))]
     else:
         cells = _voronoi_cells(seeds, lo, hi, pbc)
@@ -368,14 +411,20 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
         keep = shape.contains(pos)
         pos, grain = pos[keep], grain[keep]
     order = np.lexsort((pos[:, 2], pos[:, 1], pos[:, 0], grain))
-    pos, grain = pos[order], grain[order]
-    n_sites = len(pos)
+    return pos[order], grain[order]
 
-    # boundary rule
+
+def _boundary_removal(pos, grain, shape, pbc, r0, d_min, target_porosity, porosity_tol):
+    """The boundary rule: which sites go (bool mask) and the ``d_min`` used (``target_porosity``:
+    chosen by bisection in :data:`D_MIN_RANGE` to reach it within ``porosity_tol``, or as
+    close as the rule allows)."""
     if target_porosity is not None:
         target_porosity = float(target_porosity)
         if not 0.0 <= target_porosity < 1.0:
             raise InputError("target_porosity", target_porosity, "a fraction in [0, 1)")
+    lo, hi = shape.bounds()
+    vol = shape_volume(shape)
+    n_sites = len(pos)
     d_hi = D_MIN_RANGE[1] if target_porosity is not None else d_min
     pairs_all, r_all = _close_pairs(pos, grain, lo, hi, pbc, r0, d_hi)
     v_cluster = r0 ** 3 / SQRT2
@@ -388,62 +437,37 @@ def polycrystal(material, r0, shape=None, *, size=None, n_grains=None, grain_siz
         return _greedy_removal(n_sites, pairs_all[sel])
 
     if target_porosity is None:
-        removed = remove(d_min)
-    else:
-        a, b = D_MIN_RANGE
-        rem_a, rem_b = remove(a), remove(b)
-        p_a, p_b = porosity_of(n_sites - rem_a.sum()), porosity_of(n_sites - rem_b.sum())
-        if not p_a - porosity_tol <= target_porosity <= p_b + porosity_tol:
-            raise InputError("target_porosity", target_porosity,
-                             f"a porosity this boundary rule reaches here: [{p_a:.4f}, {p_b:.4f}] "
-                             f"(d_min in [{a}, {b}] r0)")
-        removed, d_min = (rem_a, a) if abs(p_a - target_porosity) < abs(p_b - target_porosity) else (rem_b, b)
-        for _ in range(30):
-            if abs(porosity_of(n_sites - removed.sum()) - target_porosity) <= porosity_tol:
-                break
-            m = 0.5 * (a + b)
-            rem_m = remove(m)
-            p_m = porosity_of(n_sites - rem_m.sum())
-            if abs(p_m - target_porosity) < abs(porosity_of(n_sites - removed.sum()) - target_porosity):
-                removed, d_min = rem_m, m
-            if p_m < target_porosity:
-                a = m
-            else:
-                b = m
-    pos, grain = pos[~removed], grain[~removed]
-    if len(pos) == 0:
-        raise InputError("shape", shape, f"a shape that holds at least one cluster of r0={r0:.4g} A")
+        return remove(d_min), d_min
+    a, b = D_MIN_RANGE
+    rem_a, rem_b = remove(a), remove(b)
+    p_a, p_b = porosity_of(n_sites - rem_a.sum()), porosity_of(n_sites - rem_b.sum())
+    if not p_a - porosity_tol <= target_porosity <= p_b + porosity_tol:
+        raise InputError("target_porosity", target_porosity,
+                         f"a porosity this boundary rule reaches here: [{p_a:.4f}, {p_b:.4f}] "
+                         f"(d_min in [{a}, {b}] r0)")
+    removed, d_min = (rem_a, a) if abs(p_a - target_porosity) < abs(p_b - target_porosity) else (rem_b, b)
+    for _ in range(30):
+        if abs(porosity_of(n_sites - removed.sum()) - target_porosity) <= porosity_tol:
+            break
+        m = 0.5 * (a + b)
+        rem_m = remove(m)
+        p_m = porosity_of(n_sites - rem_m.sum())
+        if abs(p_m - target_porosity) < abs(porosity_of(n_sites - removed.sum()) - target_porosity):
+            removed, d_min = rem_m, m
+        if p_m < target_porosity:
+            a = m
+        else:
+            b = m
+    return removed, d_min
 
-    # check: nearest distance after removal
+
+def _nearest_distance(pos, lo, hi, pbc):
+    """The smallest distance between two clusters (periodic where ``pbc``), Angstrom."""
     rel = pos - lo
     box = np.where(pbc, hi - lo, 0.0)
     tree = cKDTree(rel, boxsize=box if pbc.any() else None)
     dist, _ = tree.query(rel, k=2) if len(pos) > 1 else (np.array([[0.0, np.inf]]), None)
-    r_near = float(dist[:, 1].min() / r0)
-
-    cell = np.diag(hi - lo)
-    atoms = make_cluster_atoms(pos, [mat], [r0], cell=cell, pbc=pbc)
-    if isinstance(shape, Box) and np.any(lo != 0):
-        atoms.info["origin"] = lo.tolist()
-    atoms.new_array("grain", grain)
-    atoms.info["grain_rotations"] = rots
-    atoms.info["grain_seeds"] = seeds
-    porosity = porosity_of(len(pos))
-    report = {"porosity": porosity,
-              "density_g_cm3": mat.rho0 * (1.0 - porosity) / units.g_cm3,
-              "d_min_r0": float(d_min),
-              "target_porosity": target_porosity,
-              "n_sites_before_removal": int(n_sites),
-              "n_removed": int(n_sites - len(pos)),
-              "n_clusters": int(len(pos)),
-              "nearest_distance_r0": r_near,
-              "n_seeds": n_grains,
-              "shape_volume_A3": vol,
-              "pbc": pbc.tolist()}
-    report.update(grain_statistics(atoms, r0))
-    report["build_time_s"] = time.perf_counter() - t0
-    atoms.info["polycrystal"] = report
-    return atoms
+    return float(dist[:, 1].min())
 
 
 def polycrystal_summary(atoms):

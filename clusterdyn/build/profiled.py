@@ -323,13 +323,58 @@ def profiled_sample(material, r0, profile, *, depth, width, axis=0, direction=(1
         raise InputError("dims", dims, "2 (quasi-2D slab) or 3 (2-D periodic surface)")
     if dims == 2 and profile.crossed:
         raise InputError("profile", "Sinusoid(crossed=True)", "a profile h(u) in quasi-2D (dims=3 for crossed)")
-    if isinstance(slab_cells, bool) or not isinstance(slab_cells, (int, np.integer)) or slab_cells < 1:
-        raise InputError("slab_cells", slab_cells, "an integer >= 1 (lattice repeats across the slab)")
-    if isinstance(max_builds, bool) or not isinstance(max_builds, (int, np.integer)) or max_builds < 1:
-        raise InputError("max_builds", max_builds, "an integer >= 1")
+    _check_count("slab_cells", slab_cells, "an integer >= 1 (lattice repeats across the slab)")
+    _check_count("max_builds", max_builds, "an integer >= 1")
     bw = None if bin_width is None else check_positive("bin_width", bin_width)
-    if isinstance(n_sampling, bool) or not isinstance(n_sampling, (int, np.integer)) or n_sampling < 1:
-        raise InputError("n_sampling", n_sampling, "an integer >= 1 (sampling lengths per evaluation length)")
+    _check_count("n_sampling", n_sampling, "an integer >= 1 (sampling lengths per evaluation length)")
+    g = _profile_geometry(profile, r0, ax, key, dims, width, length, slab_cells, n_sampling, bw)
+    heights, scale, extremes = _profile_heights(profile, g, r0, dims, n_sampling)
+
+    def build(s):
+        return _cut_profiled_slab(mat, r0, depth, g, heights, extremes, s)
+
+    rows = ORIENTATIONS[key]
+    info = {"kind": profile.kind, "dims": dims, "axis": ax, "u_axis": g["iu"], "v_axis": g["iv"],
+            "direction": _miller(key), "bins_A": [None if b is None else float(b) for b in g["bins"]],
+            "bin_offsets_A": [-0.5 * g["d_u"], -0.5 * g["d_v"]],
+            "n_sampling": n_sampling,
+            "orientation": {"normal": _miller(rows[0]), "u": _miller(rows[1]), "v": _miller(rows[2])},
+            "depth_A": depth, "width_requested_A": width, "width_A": float(g["W"]), "length_A": float(g["Lv"]),
+            "lattice_repeats": [int(g["nu"]), int(g["nv"])], "slab_cells": int(slab_cells) if dims == 2 else None}
+    if isinstance(profile, RandomRoughness):
+        atoms = _build_to_rz(profile, build, scale, info, max_builds)
+    else:
+        atoms = build(1.0)
+        atoms.info["profile"] = dict(info)
+        m = surface_amplitude(atoms)
+        req = {"amplitude_A": profile.amplitude} if isinstance(profile, Sinusoid) else {"groove_depth_A": profile.depth}
+        info.update({**req, "period_requested_A": profile.period, "period_A": g["period_built"],
+                     "n_periods": g["n_per_u"], "crossed": bool(profile.crossed), "period_v_A": g["period_v"],
+                     "measured_amplitude_A": m["amplitude"], "measured_wavelength_A": m["wavelength"],
+                     "measured_peak_to_valley_A": float(np.ptp(surface_heights(atoms)["heights"]))})
+    atoms.info["profile"] = info
+    atoms.info["direction"] = key
+    return atoms
+
+
+def _check_count(name, value, allowed):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(name, value, allowed)
+
+
+def _whole_periods(name, value, period):
+    n = value / period
+    if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 1:
+        raise InputError(name, value, f"a whole number of periods of {period:.6g} A "
+                         f"(e.g. {max(1, round(n)) * period:.6g})")
+    return int(round(n))
+
+
+def _profile_geometry(profile, r0, ax, key, dims, width, length, slab_cells, n_sampling, bw):
+    """The lattice and the profile across the sample (checked): a dict of the lateral axes
+    ``iu``, ``iv``, the rotation ``rot``, the built repeats ``nu``, ``nv`` and lengths ``W``,
+    ``Lv``, the periods (``n_per_u``, ``n_per_v``, ``period_built``, ``period_v``), the plane
+    spacings ``d_u``, ``d_v`` and the measurement ``bins``."""
     iu, iv = _lateral_axes(ax)
     rot = crystal_rotation(key, ax)
     rep = repeat_lengths(key, r0)                 # along the direction, then the two others
@@ -339,19 +384,11 @@ def profiled_sample(material, r0, profile, *, depth, width, axis=0, direction=(1
         length = check_positive("length", length)
     elif length is not None:
         raise InputError("length", length, "None in quasi-2D (the slab is slab_cells repeats thick)")
-
-    def whole_periods(name, value, period):
-        n = value / period
-        if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 1:
-            raise InputError(name, value, f"a whole number of periods of {period:.6g} A "
-                             f"(e.g. {max(1, round(n)) * period:.6g})")
-        return int(round(n))
-
     n_per_u = n_per_v = None
     if profile.period is not None:
-        n_per_u = whole_periods("width", width, profile.period)
+        n_per_u = _whole_periods("width", width, profile.period)
         if profile.crossed:
-            n_per_v = whole_periods("length", length, profile.period)
+            n_per_v = _whole_periods("length", length, profile.period)
     else:
         xi = profile.correlation_length
         if xi < r0:
@@ -377,9 +414,16 @@ def profiled_sample(material, r0, profile, *, depth, width, axis=0, direction=(1
     if profile.period is not None and period_built < 2 * bins[0]:
         raise InputError("wavelength" if isinstance(profile, Sinusoid) else "period", profile.period,
                          f">= 2 bin widths ({2 * bins[0]:.6g} A) so that the surface resolves it")
+    return {"ax": ax, "iu": iu, "iv": iv, "rot": rot, "nu": nu, "nv": nv, "W": W, "Lv": Lv, "n_per_u": n_per_u,
+            "n_per_v": n_per_v, "period_built": period_built, "period_v": period_v, "d_u": d_u, "d_v": d_v,
+            "bins": bins}
 
-    # surface heights h(u, v) at given lateral points
+
+def _profile_heights(profile, g, r0, dims, n_sampling):
+    """The surface heights at given lateral points: ``(heights(u, v, scale), scale, extremes(scale))``
+    (a random field: its grid, scaled by ``scale``, first to the target Rz of the grid)."""
     if isinstance(profile, RandomRoughness):
+        W, Lv = g["W"], g["Lv"]
         rng = np.random.default_rng(profile.seed)
         gu = int(math.ceil(W / (0.5 * r0)))
         if dims == 3:
@@ -393,69 +437,53 @@ def profiled_sample(material, r0, profile, *, depth, width, axis=0, direction=(1
 
         def heights(u, v, scale):
             return scale * (_interp_periodic(grid, spacing, u, v if dims == 3 else None))
-        scale = profile.rz / unit_rz
-        extremes = lambda s: (s * grid.min(), s * grid.max())   # noqa: E731
-    else:
-        def heights(u, v, scale):
-            return profile.heights(u, v, period_built, period_v)
-        scale = 1.0
-        extremes = lambda s: profile.extremes()                 # noqa: E731
+        return heights, profile.rz / unit_rz, lambda s: (s * grid.min(), s * grid.max())
 
+    def heights(u, v, scale):
+        return profile.heights(u, v, g["period_built"], g["period_v"])
+    return heights, 1.0, lambda s: profile.extremes()
+
+
+def _cut_profiled_slab(mat, r0, depth, g, heights, extremes, s):
+    """The fcc sites below the surface ``depth + heights(u, v, s)``, as cluster Atoms."""
+    ax, iu, iv = g["ax"], g["iu"], g["iv"]
     pbc = np.ones(3, bool)
     pbc[ax] = False
     a = SQRT2 * r0
+    hmin, hmax = extremes(s)
+    if depth + hmin < 2.0 * r0:
+        raise InputError("depth", depth, f"> {2 * r0 - hmin:.6g} A (the deepest valley, {-hmin:.6g} A below "
+                         "the mean surface, must leave 2 r0 of material)")
+    hi = np.zeros(3)
+    hi[ax], hi[iu], hi[iv] = depth + hmax + a, g["W"], g["Lv"]
+    pos = fcc_sites(r0, g["rot"], np.zeros(3), hi)
+    keep = pos[:, ax] < depth + heights(pos[:, iu], pos[:, iv], s)
+    pos = pos[keep]
+    order = np.lexsort((pos[:, 2], pos[:, 1], pos[:, 0]))
+    cell = np.zeros(3)
+    cell[ax], cell[iu], cell[iv] = depth + hmax, g["W"], g["Lv"]
+    return make_cluster_atoms(pos[order], [mat], [r0], cell=np.diag(cell), pbc=pbc)
 
-    def build(s):
-        hmin, hmax = extremes(s)
-        if depth + hmin < 2.0 * r0:
-            raise InputError("depth", depth, f"> {2 * r0 - hmin:.6g} A (the deepest valley, {-hmin:.6g} A below "
-                             "the mean surface, must leave 2 r0 of material)")
-        hi = np.zeros(3)
-        hi[ax], hi[iu], hi[iv] = depth + hmax + a, W, Lv
-        pos = fcc_sites(r0, rot, np.zeros(3), hi)
-        keep = pos[:, ax] < depth + heights(pos[:, iu], pos[:, iv], s)
-        pos = pos[keep]
-        order = np.lexsort((pos[:, 2], pos[:, 1], pos[:, 0]))
-        cell = np.zeros(3)
-        cell[ax], cell[iu], cell[iv] = depth + hmax, W, Lv
-        return make_cluster_atoms(pos[order], [mat], [r0], cell=np.diag(cell), pbc=pbc)
 
-    rows = ORIENTATIONS[key]
-    info = {"kind": profile.kind, "dims": dims, "axis": ax, "u_axis": iu, "v_axis": iv,
-            "direction": _miller(key), "bins_A": [None if b is None else float(b) for b in bins],
-            "bin_offsets_A": [-0.5 * d_u, -0.5 * d_v],
-            "n_sampling": n_sampling,
-            "orientation": {"normal": _miller(rows[0]), "u": _miller(rows[1]), "v": _miller(rows[2])},
-            "depth_A": depth, "width_requested_A": width, "width_A": float(W), "length_A": float(Lv),
-            "lattice_repeats": [int(nu), int(nv)], "slab_cells": int(slab_cells) if dims == 2 else None}
-    if isinstance(profile, RandomRoughness):
-        best = None
-        for _ in range(max_builds):
-            atoms = build(scale)
-            atoms.info["profile"] = dict(info)
-            r = surface_roughness(atoms)
-            err = abs(r["rz"] / profile.rz - 1.0)
-            if best is None or err < best[0]:
-                best = (err, atoms, scale, r)
-            if err < 0.01:
-                break
-            scale *= profile.rz / r["rz"]
-        _, atoms, scale, r = best
-        info.update({"rz_target_A": profile.rz, "correlation_length_target_A": profile.correlation_length,
-                     "seed": profile.seed, "sigma_A": float(scale), "rz_A": r["rz"], "rms_A": r["rms"],
-                     "correlation_length_A": r["correlation_length"],
-                     "rz_rel_error": r["rz"] / profile.rz - 1.0})
-    else:
-        atoms = build(1.0)
+def _build_to_rz(profile, build, scale, info, max_builds):
+    """A random surface built up to ``max_builds`` times, rescaled each time towards the target Rz
+    measured on the clusters; the closest is kept and ``info`` takes what it achieved."""
+    best = None
+    for _ in range(max_builds):
+        atoms = build(scale)
         atoms.info["profile"] = dict(info)
-        m = surface_amplitude(atoms)
-        req = {"amplitude_A": profile.amplitude} if isinstance(profile, Sinusoid) else {"groove_depth_A": profile.depth}
-        info.update({**req, "period_requested_A": profile.period, "period_A": period_built,
-                     "n_periods": n_per_u, "crossed": bool(profile.crossed), "period_v_A": period_v,
-                     "measured_amplitude_A": m["amplitude"], "measured_wavelength_A": m["wavelength"],
-                     "measured_peak_to_valley_A": float(np.ptp(surface_heights(atoms)["heights"]))})
-    atoms.info["profile"] = info
-    atoms.info["direction"] = key
+        r = surface_roughness(atoms)
+        err = abs(r["rz"] / profile.rz - 1.0)
+        if best is None or err < best[0]:
+            best = (err, atoms, scale, r)
+        if err < 0.01:
+            break
+        scale *= profile.rz / r["rz"]
+    _, atoms, scale, r = best
+    info.update({"rz_target_A": profile.rz, "correlation_length_target_A": profile.correlation_length,
+                 "seed": profile.seed, "sigma_A": float(scale), "rz_A": r["rz"], "rms_A": r["rms"],
+                 "correlation_length_A": r["correlation_length"],
+                 "rz_rel_error": r["rz"] / profile.rz - 1.0})
     return atoms
 
 

@@ -171,17 +171,7 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
     L = repeat_lengths(key, r0) * np.array(size)
     V = float(np.prod(L))
     phi = volume_fraction(w, mat_i.rho0, mat_m.rho0)
-    # diameters: draw until the spheres' volume reaches the target
-    rng = np.random.default_rng([seed, 7])
-    target = phi * V
-    diam, vol = [], 0.0
-    while vol < target:
-        d = D * (1.0 + diameter_spread * float(np.clip(rng.normal(), -2, 2))) if diameter_spread else D
-        v = math.pi / 6.0 * d ** 3
-        if vol + 0.5 * v > target and diam:        # nearest total to the target
-            break
-        diam.append(d)
-        vol += v
+    diam = _sphere_diameters(D, diameter_spread, phi * V, seed)
     if not diam:
         raise InputError("mass_fraction", w, f"enough inclusion volume for one sphere of {D / units.um:g} um "
                          f"in this sample ({np.round(L / units.um, 1).tolist()} um); enlarge the sample")
@@ -190,34 +180,7 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
         raise InputError("inclusion_diameter", D / units.um,
                          f"a diameter below the smallest box length ({L.min() / units.um:.4g} um)")
     centres = place_spheres(L, diam, gap=gap, periodic=(True, True, True), seed=seed)
-
-    def inside(pts):
-        """Index of the sphere holding each point (-1: none)."""
-        tree = cKDTree(np.mod(pts, L), boxsize=L)
-        lab = np.full(len(pts), -1, np.int64)
-        for k, (c, d) in enumerate(zip(centres, diam)):
-            idx = tree.query_ball_point(np.mod(c, L), 0.5 * d)
-            lab[idx] = k
-        return lab
-
-    matrix_sites = fcc_sites(r0, R, np.zeros(3), L)
-    if r0i == r0:
-        lab = inside(matrix_sites)
-        pos = matrix_sites
-        mid = (lab >= 0).astype(np.int64)
-    else:
-        inc = fcc_sites(r0i, R, np.zeros(3), L)
-        inc = inc[inside(inc) >= 0]
-        keep = inside(matrix_sites) < 0
-        m_sites = matrix_sites[keep]
-        if len(inc):
-            tree = cKDTree(np.mod(inc, L), boxsize=L)
-            dist, _ = tree.query(np.mod(m_sites, L))
-            m_sites = m_sites[dist >= d_min * 0.5 * (r0 + r0i)]
-        pos = np.vstack([m_sites, inc])
-        mid = np.concatenate([np.zeros(len(m_sites), np.int64), np.ones(len(inc), np.int64)])
-    order = np.lexsort((pos[:, 2], pos[:, 1], pos[:, 0]))
-    pos, mid = pos[order], mid[order]
+    pos, mid = _two_phase_sites(r0, r0i, R, L, centres, diam, d_min)
     atoms = make_cluster_atoms(pos, [mat_m, mat_i], [r0, r0i], material_id=mid, cell=np.diag(L), pbc=pbc)
     atoms.info["direction"] = key
     m = atoms.get_masses()
@@ -232,6 +195,56 @@ def two_phase(matrix, inclusion, mass_fraction, inclusion_diameter, r0=4 * units
         "n_matrix": int((mid == 0).sum()), "n_inclusion": int((mid == 1).sum()),
     }
     return atoms
+
+
+def _sphere_diameters(D, spread, target, seed):
+    """Sphere diameters of mean ``D`` (relative spread ``spread``, normal law clipped to +- 2
+    spreads), drawn until their volume is nearest ``target``: a list (empty when not even
+    half a sphere fits the target)."""
+    rng = np.random.default_rng([seed, 7])
+    diam, vol = [], 0.0
+    while vol < target:
+        d = D * (1.0 + spread * float(np.clip(rng.normal(), -2, 2))) if spread else D
+        v = math.pi / 6.0 * d ** 3
+        if vol + 0.5 * v > target and diam:        # nearest total to the target
+            break
+        diam.append(d)
+        vol += v
+    return diam
+
+
+def _sphere_labels(pts, L, centres, diam):
+    """Index of the sphere holding each point (-1: none), periodic box ``L``."""
+    tree = cKDTree(np.mod(pts, L), boxsize=L)
+    lab = np.full(len(pts), -1, np.int64)
+    for k, (c, d) in enumerate(zip(centres, diam)):
+        idx = tree.query_ball_point(np.mod(c, L), 0.5 * d)
+        lab[idx] = k
+    return lab
+
+
+def _two_phase_sites(r0, r0i, R, L, centres, diam, d_min):
+    """The clusters of both phases, sorted by position: (positions, material ids).  Equal sizes:
+    one lattice, its sites in a sphere are inclusion clusters; else each phase its own lattice,
+    matrix clusters closer than ``d_min (r0 + r0i)/2`` to an inclusion cluster left out."""
+    matrix_sites = fcc_sites(r0, R, np.zeros(3), L)
+    if r0i == r0:
+        lab = _sphere_labels(matrix_sites, L, centres, diam)
+        pos = matrix_sites
+        mid = (lab >= 0).astype(np.int64)
+    else:
+        inc = fcc_sites(r0i, R, np.zeros(3), L)
+        inc = inc[_sphere_labels(inc, L, centres, diam) >= 0]
+        keep = _sphere_labels(matrix_sites, L, centres, diam) < 0
+        m_sites = matrix_sites[keep]
+        if len(inc):
+            tree = cKDTree(np.mod(inc, L), boxsize=L)
+            dist, _ = tree.query(np.mod(m_sites, L))
+            m_sites = m_sites[dist >= d_min * 0.5 * (r0 + r0i)]
+        pos = np.vstack([m_sites, inc])
+        mid = np.concatenate([np.zeros(len(m_sites), np.int64), np.ones(len(inc), np.int64)])
+    order = np.lexsort((pos[:, 2], pos[:, 1], pos[:, 0]))
+    return pos[order], mid[order]
 
 
 def rest_volumes(atoms):

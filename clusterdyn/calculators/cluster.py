@@ -203,7 +203,7 @@ class ClusterDynamics(Calculator):
 
     # -- the pair loop (the engine's) ----------------------------------------------------
     def compute(self, atoms, per_particle=False, damping=None, step=None, out=None, virial=True,
-                energy=True, kick=None, forces=True, advanced=False):
+                energy=True, kick=None, forces=True, advanced=False, conservative=False):
         """Run the pair loop on ``atoms`` (no copy): :meth:`clusterdyn.engine.CDEngine.forces`
         with this calculator's material ids and set-up bonds.  Returns a dict of results.
 
@@ -216,8 +216,10 @@ class ClusterDynamics(Calculator):
         second half kick).  ``forces=False`` (without damping, kick or out): the
         energy and virials only, no (N, 3) array made or written (``"forces"``
         is None).  ``advanced``: the positions are those the engine's last
-        :meth:`~clusterdyn.engine.CDEngine.advance` made.  Raises InstabilityError if a pair
-        is closer than the tabulated range.
+        :meth:`~clusterdyn.engine.CDEngine.advance` made.  ``conservative``: a damped step's
+        pass also gives the conservative forces apart (``"conservative"``, the same bits as an
+        undamped pass), in the same pair loop.  Raises InstabilityError if a pair is closer than
+        the tabulated range.
 
         The kernel is chosen per call from what is asked: one material or
         several (or ``attraction="initial"``), with or without damping, cell
@@ -228,7 +230,8 @@ class ClusterDynamics(Calculator):
         eng = self.engine
         return eng.forces(atoms.arrays["positions"], atoms.cell.array, atoms.pbc, self._types(atoms, eng.nl.version),
                           self._bonds(atoms), per_particle=per_particle, damping=damping, step=step, out=out,
-                          virial=virial, energy=energy, kick=kick, forces=forces, advanced=advanced)
+                          virial=virial, energy=energy, kick=kick, forces=forces, advanced=advanced,
+                          conservative=conservative)
 
     def removed(self, keep_n):
         """The Atoms' particles where ``keep_n`` (bool, the old rows) is False were taken out, the

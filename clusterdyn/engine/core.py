@@ -111,16 +111,17 @@ class CDEngine:
         return len(self.potentials) > 1
 
     # -- buffers -------------------------------------------------------------------
-    def _layout(self, n, per_particle, damped):
+    def _layout(self, n, per_particle, damped, conservative=False):
         """Chunks and buffers of the current list (recomputed after each rebuild)."""
         nl = self.nl
         lay = self._lay
         if lay is None or lay["n"] != n:
             # a new particle count (particles removed): the pair-slot buffers and the velocities'
             # store are kept (they grow, never shrink), so a removal allocates nothing of N's size
-            old = lay or {"f_m3": np.empty((0, 3)), "e_m1": _NO_PP1, "w_m6": _NO_PP6, "vs_store": None}
+            old = lay or {"f_m3": np.empty((0, 3)), "e_m1": _NO_PP1, "w_m6": _NO_PP6, "c_m3": _NO_V,
+                          "vs_store": None}
             lay = {"n": n, "key": None, "vs": None, "f_m3": old["f_m3"], "e_m1": old["e_m1"], "w_m6": old["w_m6"],
-                   "vs_store": old["vs_store"]}
+                   "c_m3": old["c_m3"], "vs_store": old["vs_store"]}
             self._lay = lay
         if lay["key"] != nl.version:
             nk = C.chunk_count(n, nl.layer_rows)
@@ -133,12 +134,14 @@ class CDEngine:
             if lay["f_m3"].shape[0] < m:
                 lay["f_m3"] = None          # let the old buffer go first: never both held
                 lay["f_m3"] = np.empty((m + m // 8, 3))
-                lay["e_m1"], lay["w_m6"] = _NO_PP1, _NO_PP6
+                lay["e_m1"], lay["w_m6"], lay["c_m3"] = _NO_PP1, _NO_PP6, _NO_V
             lay["key"] = nl.version
         m = lay["f_m3"].shape[0]
         if per_particle and lay["e_m1"].shape[0] != m:
             lay["e_m1"] = np.empty((m, 1))
             lay["w_m6"] = np.empty((m, 6))
+        if conservative and lay["c_m3"].shape[0] != m:
+            lay["c_m3"] = np.empty((m, 3))
         if damped and lay["vs"] is None:
             lay["vs_store"] = grown(lay["vs_store"], n)
             lay["vs"] = lay["vs_store"][:n]
@@ -146,7 +149,7 @@ class CDEngine:
 
     # -- one pair pass -------------------------------------------------------------------
     def forces(self, pos, cell, pbc, types, bonds=None, *, per_particle=False, damping=None, step=None,
-               out=None, virial=True, energy=True, kick=None, forces=True, advanced=False):
+               out=None, virial=True, energy=True, kick=None, forces=True, advanced=False, conservative=False):
         """One pair pass over ``pos`` ((N, 3), caller's order).  Returns a dict of results.
 
         ``types``: checked material ids (N,); ``bonds = (bonds_nk, id_n)`` for
@@ -158,12 +161,18 @@ class CDEngine:
         with ``kick`` or ``out``: the step variants with the energy).  ``kick = (momenta_nc, h)``
         adds ``h * forces`` to the momenta.  ``forces=False`` (without damping, kick or out):
         the energy and virials only.  ``advanced=True``: the positions are those of the last
-        :meth:`advance`, whose gathers this pass uses.  Raises InstabilityError if a pair is
+        :meth:`advance`, whose gathers this pass uses.  ``conservative=True`` (with damping, kick
+        or out, and ``energy``): the damped step also gives the conservative forces apart,
+        ``"conservative"`` ((N, 3), caller's order), the same bits as a pass without damping
+        gives, in the same pair loop (no second pass).  Raises InstabilityError if a pair is
         closer than the tabulated range (the step has failed then: the rows the pair loop wrote
         itself may have had their kick).
         """
         if not forces and (damping is not None or kick is not None or out is not None):
             raise InputError("forces", forces, "True when damping, kick or out is given")
+        if conservative and (damping is None or not energy or (kick is None and out is None)):
+            raise InputError("conservative", conservative, "False unless a damped step's pass (damping, kick "
+                             "or out, energy) is asked")
         n = pos.shape[0]
         nl = self.nl
         adv, self._pending = self._pending, None
@@ -174,7 +183,7 @@ class CDEngine:
         initial = bonds is not None
         bonds_nk, id_n = bonds if initial else (_NO_BONDS, _NO_IDS)
         multi = self.multi or initial
-        lay = self._layout(n, per_particle, damping is not None)
+        lay = self._layout(n, per_particle, damping is not None, conservative)
         perm = nl.perm_n
         xs = lay["xs"]
         if not fresh and not rebuilt:       # a build (always sorted here) leaves them in xs
@@ -185,11 +194,12 @@ class CDEngine:
             vs = lay["vs"]
             if not (fresh and adv[2]):
                 gather_velocities(p_nc, invm_n, perm, vs)
-        key = (multi, damping is not None, per_particle, virial, energy, kick is not None or out is not None)
+        key = (multi, damping is not None, per_particle, virial, energy, kick is not None or out is not None,
+               conservative)
         variant = self._variants.get(key)
         if variant is None:
             variant = self._variants[key] = K.select(key[0], damped=key[1], per_particle=key[2], virial=key[3],
-                                                     energy=key[4], step=key[5])
+                                                     energy=key[4], step=key[5], conservative=key[6])
         stat, vir = lay["stat_k"], lay["vir_k6"]
         f_nc = _NO_V if not forces else np.empty((n, 3)) if out is None else out
         p_kick, h = (_NO_V, 0.0) if kick is None else (kick[0], float(kick[1]))
@@ -199,7 +209,7 @@ class CDEngine:
         args = (xs, types[perm] if multi else _NO_TYPES, nl.first_n, nl.jp_p, nl.img_shift, nl.image_sc, perm,
                 bonds_nk, id_n, initial)
         tab = (self.gtab, self.coef, self.meta, eta)
-        buf = (lay["f_m3"], stat, vir, vs, lay["e_m1"], lay["w_m6"])
+        buf = (lay["f_m3"], stat, vir, vs, lay["e_m1"], lay["w_m6"], lay["c_m3"] if conservative else _NO_V)
         fin = (f_nc, p_kick, h)
         ch = lay["ch"]
         K.run(variant, args, tab, ch, buf, fin)
@@ -225,6 +235,10 @@ class CDEngine:
         elif forces:
             C.reduce_rows(lay["f_m3"], ch, perm, f_nc, p_kick, h)
         res = {"forces": f_nc if forces else None, "energy": float(stat[:, 0].sum()) if variant.ENERGY else None}
+        if conservative:
+            c = np.empty((n, 3))
+            C.reduce_rows(lay["c_m3"], ch, perm, c, _NO_V, 0.0)
+            res["conservative"] = c
         if damping is not None:
             res["dissipation"] = float(stat[:, 5].sum())     # eV per ASE time, >= 0
         if variant.VIR:

@@ -26,6 +26,10 @@ picks one from what a pass asks); LLVM removes the code of every term a variant 
 - ``PP``: per-particle energies and virials (``energies``, ``stresses``).
 - ``attraction="initial"``: a run-time flag (``PairArgs.initial``) of the
   multi-material kernels, which also serve single-material runs that use it.
+- ``CONS``: a damped pass that also keeps the conservative forces apart, in buffer rows of their
+  own (``c_mc``), summed in the same order as the undamped kernels sum theirs: the same bits as
+  a conservative pass gives (:class:`clusterdyn.md.DampedVerlet` asks for them on the steps an
+  observer reads, so that an H5MD frame of a damped run needs no pass of its own).
 - ``ENERGY``: the pair energy (the dynamics' steps leave it out, about a
   tenth of the loop; :class:`clusterdyn.md.DampedVerlet` asks for it in a step's
   pass only when an observer reads that step, else when it is read).
@@ -85,8 +89,9 @@ Tables = namedtuple("Tables", "gtab coef meta eta_tt")
 
 
 #: a pass's buffers: the chunks' force rows, their stats and virials, the rows' velocities (empty
-#: without damping) and the per-particle rows (empty unless asked)
-PassBuffers = namedtuple("PassBuffers", "f_mc stat_k vir_k6 vs_nc e_m1 w_m6")
+#: without damping), the per-particle rows (empty unless asked) and the conservative force rows
+#: of a damped pass (``CONS``; empty otherwise)
+PassBuffers = namedtuple("PassBuffers", "f_mc stat_k vir_k6 vs_nc e_m1 w_m6 c_mc")
 
 
 #: where a pass's forces go: ``out_nc`` (caller's order) and the half kick ``p_nc += h f``
@@ -95,7 +100,7 @@ Finish = namedtuple("Finish", "out_nc p_nc h")
 
 
 #: the compile-time flags of a pass (module docstring); one kernel per value (:data:`KERNELS`)
-Variant = namedtuple("Variant", "MULTI DAMP VIR PP ENERGY TRACK FIN")
+Variant = namedtuple("Variant", "MULTI DAMP VIR PP ENERGY TRACK FIN CONS", defaults=(False,))
 
 
 def kernel_tables(coef, meta):
@@ -164,12 +169,13 @@ def _bonded(bonds_nk, i, jid):
 
 
 @njit(inline="always")
-def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h):
+def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, c_mc, out_nc, p_nc, h):
     """The pair loop of chunk k: ``args`` :class:`PairArgs`, ``tab`` :class:`Tables`, ``ch``
     :class:`~clusterdyn.engine.chunks.Chunks` (read only, as plain tuples in the namedtuples'
     field order), ``V`` the :class:`Variant` (a module constant of the calling kernel: its flags
     fold away); the fields of :class:`PassBuffers` and :class:`Finish` one by one (:func:`_pass`)."""
     MULTI, DAMP, VIR, PP, ENERGY, TRACK, FIN = V.MULTI, V.DAMP, V.VIR, V.PP, V.ENERGY, V.TRACK, V.FIN
+    CONS = V.CONS
     xs_nc, type_s, first_n, jp_p, shift, image_sc, perm_n, bonds_nk, id_n, initial = args
     INIT = initial if MULTI else False
     gtab, coef, meta, eta_tt = tab
@@ -183,6 +189,10 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
         f_mc[r, 0] = 0.0
         f_mc[r, 1] = 0.0
         f_mc[r, 2] = 0.0
+        if CONS:
+            c_mc[r, 0] = 0.0
+            c_mc[r, 1] = 0.0
+            c_mc[r, 2] = 0.0
         if PP:
             e_m1[r, 0] = 0.0
             for c in range(6):
@@ -225,6 +235,9 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
         fxi = 0.0
         fyi = 0.0
         fzi = 0.0
+        cxi = 0.0
+        cyi = 0.0
+        czi = 0.0
         for p in range(np.uint64(first_n[i]), np.uint64(first_n[i + 1])):
             v = jp_p[p]
             ju = np.uint64(v & jmask)  # unsigned: no negative-index wraparound code per access
@@ -322,6 +335,15 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
                     w_m6[rj, 3] += 0.5 * hyz
                     w_m6[rj, 4] += 0.5 * hxz
                     w_m6[rj, 5] += 0.5 * hxy
+            if CONS:
+                # the conservative force alone, summed as the undamped kernels sum theirs
+                cxi -= fx
+                cyi -= fy
+                czi -= fz
+                rj = offu + ju
+                c_mc[rj, 0] += fx
+                c_mc[rj, 1] += fy
+                c_mc[rj, 2] += fz
             if DAMP:
                 if MULTI:
                     eta = eta_tt[a, b]
@@ -343,6 +365,10 @@ def _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc,
         f_mc[off + i, 0] += fxi
         f_mc[off + i, 1] += fyi
         f_mc[off + i, 2] += fzi
+        if CONS:
+            c_mc[off + i, 0] += cxi
+            c_mc[off + i, 1] += cyi
+            c_mc[off + i, 2] += czi
     if FIN:
         kick = p_nc.shape[0] > 0
         for i in range(bounds_k[k], bounds_k[k + 1]):
@@ -373,10 +399,10 @@ def _pass(args, tab, ch, buf, fin, V):
     """Every chunk's loop, in parallel (the body of the kernels below).  The arrays a chunk
     writes are taken out of their tuples here, outside the ``prange`` loop: numba loses the
     writes to an array taken out of a tuple inside it (numba 0.58)."""
-    f_mc, stat_k, vir_k6, vs_nc, e_m1, w_m6 = buf
+    f_mc, stat_k, vir_k6, vs_nc, e_m1, w_m6, c_mc = buf
     out_nc, p_nc, h = fin
     for k in prange(ch[0].shape[0] - 1):
-        _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, out_nc, p_nc, h)
+        _chunk(k, args, tab, ch, V, vs_nc, f_mc, stat_k, vir_k6, e_m1, w_m6, c_mc, out_nc, p_nc, h)
 
 
 # -- the variants: one module-level kernel per Variant constant (cached on disk by numba) ----
@@ -386,12 +412,16 @@ V_FORCES_ENERGY_1 = Variant(MULTI=False, DAMP=False, VIR=False, PP=False, ENERGY
 V_VIRIAL_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
 V_DAMPED_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=False, FIN=True)
 V_DAMPED_ENERGY_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True)
+V_DAMPED_CONS_1 = Variant(MULTI=False, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=False, FIN=True,
+                          CONS=True)
 V_PER_PARTICLE_1 = Variant(MULTI=False, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
 V_FORCES_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
 V_FORCES_ENERGY_MULTI = Variant(MULTI=True, DAMP=False, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
 V_VIRIAL_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=False, ENERGY=True, TRACK=True, FIN=False)
 V_DAMPED_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=False, TRACK=True, FIN=True)
 V_DAMPED_ENERGY_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True)
+V_DAMPED_CONS_MULTI = Variant(MULTI=True, DAMP=True, VIR=False, PP=False, ENERGY=True, TRACK=True, FIN=True,
+                              CONS=True)
 V_PER_PARTICLE_MULTI = Variant(MULTI=True, DAMP=False, VIR=True, PP=True, ENERGY=True, TRACK=True, FIN=False)
 
 
@@ -423,6 +453,12 @@ def pass_damped_1(args, tab, ch, buf, fin):
 def pass_damped_energy_1(args, tab, ch, buf, fin):
     """One material: damped forces and the (conservative) energy."""
     _pass(args, tab, ch, buf, fin, V_DAMPED_ENERGY_1)
+
+
+@njit(cache=True, parallel=True)
+def pass_damped_cons_1(args, tab, ch, buf, fin):
+    """One material: damped forces, the energy, and the conservative forces apart (``c_mc``)."""
+    _pass(args, tab, ch, buf, fin, V_DAMPED_CONS_1)
 
 
 @njit(cache=True, parallel=True)
@@ -462,6 +498,12 @@ def pass_damped_energy_multi(args, tab, ch, buf, fin):
 
 
 @njit(cache=True, parallel=True)
+def pass_damped_cons_multi(args, tab, ch, buf, fin):
+    """Several materials: damped forces, the energy, and the conservative forces apart."""
+    _pass(args, tab, ch, buf, fin, V_DAMPED_CONS_MULTI)
+
+
+@njit(cache=True, parallel=True)
 def pass_per_particle_multi(args, tab, ch, buf, fin):
     """Several materials: with per-particle energies and virials."""
     _pass(args, tab, ch, buf, fin, V_PER_PARTICLE_MULTI)
@@ -474,21 +516,26 @@ KERNELS = {
     V_VIRIAL_1: pass_virial_1,
     V_DAMPED_1: pass_damped_1,
     V_DAMPED_ENERGY_1: pass_damped_energy_1,
+    V_DAMPED_CONS_1: pass_damped_cons_1,
     V_PER_PARTICLE_1: pass_per_particle_1,
     V_FORCES_MULTI: pass_forces_multi,
     V_FORCES_ENERGY_MULTI: pass_forces_energy_multi,
     V_VIRIAL_MULTI: pass_virial_multi,
     V_DAMPED_MULTI: pass_damped_multi,
     V_DAMPED_ENERGY_MULTI: pass_damped_energy_multi,
+    V_DAMPED_CONS_MULTI: pass_damped_cons_multi,
     V_PER_PARTICLE_MULTI: pass_per_particle_multi,
 }
 
 
-def select(multi, *, damped, per_particle, virial, energy, step):
+def select(multi, *, damped, per_particle, virial, energy, step, conservative=False):
     """The variant of a pass: several materials (or ``attraction="initial"``) or one; damped;
     per-particle energies and virials; the cell virial; the energy; ``step``: a dynamics step's
-    pass (forces with the half kick).  A pass without virial or per-particle output, damped or a
-    step, writes its unshared rows itself (``FIN``)."""
+    pass (forces with the half kick); ``conservative``: a damped pass that also keeps the
+    conservative forces apart (with the energy).  A pass without virial or per-particle output,
+    damped or a step, writes its unshared rows itself (``FIN``)."""
+    if damped and conservative:
+        return V_DAMPED_CONS_MULTI if multi else V_DAMPED_CONS_1
     if damped:
         return V_DAMPED_ENERGY_MULTI if multi and energy else V_DAMPED_MULTI if multi else \
             V_DAMPED_ENERGY_1 if energy else V_DAMPED_1

@@ -471,15 +471,17 @@ class DampedVerlet(MolecularDynamics):
         n = len(atoms)
         self._fbuf = grown(self._fbuf, n)
         frame = self._observed(at)
+        # an observed damped step keeps the conservative forces apart in the same pair loop
         out = self.calc.compute(atoms, damping=damping, step=at, out=self._fbuf[:n], virial=False, energy=frame,
-                                advanced=advanced, kick=None if kick is None else (atoms.arrays["momenta"], kick))
+                                advanced=advanced, kick=None if kick is None else (atoms.arrays["momenta"], kick),
+                                conservative=frame and damping is not None)
         self._epot = None
         self._pair_energy = out["energy"]
         self._dissipation = out.get("dissipation", 0.0)
         if frame:
-            # an observer reads this step: the calculator gets the pass's energy and (undamped:
-            # they are the conservative ones) forces, so that it needs no pass of its own
-            self.calc.publish(atoms, out["energy"], out["forces"] if damping is None else None)
+            # an observer reads this step: the calculator gets the pass's energy and conservative
+            # forces (undamped: the step's own), so that it needs no pass of its own
+            self.calc.publish(atoms, out["energy"], out["forces"] if damping is None else out["conservative"])
         if self.stability_limit is not None and self.nsteps % self.check_interval == 0:
             if self._stiffness is None or self._stiffness.dt != self.dt:
                 self._stiffness = StiffnessCheck(self.calc, self.dt)

@@ -24,24 +24,19 @@ def _box(seed=1):
 
 @pytest.mark.parametrize("J", [None, 50.0])
 def test_an_h5md_frame_costs_no_force_pass(tmp_path, J):
-    """A writer attached every 5 steps: without damping the steps' own passes give every frame's
-    forces and energy (one pass a step, nothing else); with damping the steps' forces hold the
-    damping, so a frame's conservative forces take one pass (its energy comes from the step).
-    The forces and energy the calculator then reports are those of its own full pass (forces,
-    energy, virial) bit for bit, and a fresh calculator's (another list: another order of the
-    sums) to rounding."""
+    """A writer attached every 5 steps: the steps' own passes give every frame's forces and energy
+    (one pass a step, nothing else), with damping too (the observed steps' pass keeps the
+    conservative forces apart from the damped ones).  The forces and energy the calculator then
+    reports are those of its own full pass (forces, energy, virial) bit for bit, and a fresh
+    calculator's (another list: another order of the sums) to rounding."""
     a = _box()
     dyn = DampedVerlet(a, J=J)
     writer = H5MDWriter(tmp_path / "run.h5md", a, dyn=dyn)
     dyn.attach(writer, interval=5)
     dyn.run(20)
     writer.close()
-    frames = 5                                                   # steps 0, 5, 10, 15, 20
-    passes = dict(a.calc.engine.passes)
-    if J is None:
-        assert passes == {"forces": 1, "step": 20}              # the start's forces, then the steps
-    else:
-        assert passes == {"forces": 1 + frames, "step": 20}
+    # 5 frames (steps 0, 5, 10, 15, 20); before, with damping: {"forces": 6, "step": 20}
+    assert dict(a.calc.engine.passes) == {"forces": 1, "step": 20}   # the start's forces, then the steps
     f = a.calc.get_property("forces", a, allow_calculation=False)
     e = a.calc.get_property("energy", a, allow_calculation=False)
     assert e + dyn._constraint_energy() == dyn.potential_energy
@@ -51,6 +46,40 @@ def test_an_h5md_frame_costs_no_force_pass(tmp_path, J):
     fresh.calc = ClusterDynamics()
     np.testing.assert_allclose(f, fresh.get_forces(), rtol=0, atol=1e-12 * np.abs(f).max())
     assert e == pytest.approx(fresh.get_potential_energy(), rel=1e-13)
+
+
+@pytest.mark.parametrize("materials", [1, 2])
+def test_a_damped_step_publishes_the_conservative_forces_of_every_frame(materials):
+    """On every observed step of a damped run (one material, and two: the multi-material kernels)
+    the calculator holds, from the step's own pass, the forces and energy its own conservative
+    pass gives, bit for bit, while the dynamics' forces hold the damping; the damped steps
+    themselves are the same bits with and without observers."""
+    def box():
+        a = _box()
+        if materials == 2:
+            a.info["cd_materials"] = ["Al", "Al"]
+            a.info["cd_r0"] = [R0, R0]
+            a.arrays["material"] = np.arange(len(a)) % 2
+        return a
+
+    a = box()
+    dyn = DampedVerlet(a, J=20.0)
+    seen = []
+
+    def check():
+        f = a.calc.get_property("forces", a, allow_calculation=False)
+        e = a.calc.get_property("energy", a, allow_calculation=False)
+        full = a.calc.compute(a)                 # a conservative pass of its own, for the check
+        assert np.array_equal(f, full["forces"]) and e == full["energy"]
+        assert not np.array_equal(f, dyn.forces)   # the step's forces hold the damping
+        seen.append(dyn.nsteps)
+
+    dyn.attach(check, interval=3)
+    dyn.run(9)
+    assert seen == [0, 3, 6, 9]
+    quiet = box()
+    DampedVerlet(quiet, J=20.0).run(9)
+    assert np.array_equal(a.positions, quiet.positions) and np.array_equal(a.get_momenta(), quiet.get_momenta())
 
 
 def test_published_results_are_dropped_when_the_atoms_change():

@@ -438,6 +438,33 @@ def check_deck(atoms, calc, dyn, allow_region=False):
     return drive_cmds, groups, held, bonds
 
 
+def _dump_lines(frames, every, probes):
+    """The deck's dumps: ``frames.dump`` every ``every`` steps (when ``frames``) and the probes'
+    (:func:`export_lammps`)."""
+    from ...md.lammps_form import group_lines
+    vir = "compute         vir all stress/atom NULL virial"
+    lines = []
+    if frames:
+        lines += [
+            vir,
+            f"dump            frames all custom {every} frames.dump id type x y z vx vy vz fx fy fz "
+            "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
+            "dump_modify     frames sort id format float %.17g",
+        ]
+    for name, rows, pevery in probes:
+        if rows is None:                        # the whole sample, as frames.dump, at its own cadence
+            if not frames and vir not in lines:
+                lines.append(vir)
+            lines += [f"dump            {name} all custom {int(pevery)} {name}.dump id type x y z vx vy vz fx fy fz "
+                      "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
+                      f"dump_modify     {name} sort id format float %.17g"]
+            continue
+        lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
+        lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
+                  f"dump_modify     {name} sort id format float %.17g"]
+    return lines
+
+
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
                   seed=12345, skin=None, extra=None, dump_every=None, probes=(), region_removal=False):
     """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
@@ -530,25 +557,7 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         "thermo_modify   format float %.17g" + (" lost/bond ignore" if initial else ""),
         f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
     ]
-    if frames:
-        lines += [
-            "compute         vir all stress/atom NULL virial",
-            f"dump            frames all custom {every} frames.dump id type x y z vx vy vz fx fy fz "
-            "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
-            "dump_modify     frames sort id format float %.17g",
-        ]
-    from ...md.lammps_form import group_lines
-    for name, rows, pevery in probes:
-        if rows is None:                        # the whole sample, as frames.dump, at its own cadence
-            if not frames and "compute         vir all stress/atom NULL virial" not in lines:
-                lines.append("compute         vir all stress/atom NULL virial")
-            lines += [f"dump            {name} all custom {int(pevery)} {name}.dump id type x y z vx vy vz fx fy fz "
-                      "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
-                      f"dump_modify     {name} sort id format float %.17g"]
-            continue
-        lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
-        lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
-                  f"dump_modify     {name} sort id format float %.17g"]
+    lines += _dump_lines(frames, every, probes)
     region = getattr(dyn, "region", None) if region_removal else None
     if region is None:
         lines.append(f"run             {nsteps}")
