@@ -494,9 +494,9 @@ def df_check(out, figdir):
     print("\nthe peer's impact face (first slab of width l0): equivalent plastic strain and the adiabatic "
           f"heating it implies (beta {BETA_TQ}, c_p {CP_J_KG_K} J/(kg K), JC m {JC_M}, T_melt {T_MELT} K, "
           f"room {T_ROOM} K)")
-    print("| test | across | ep face slab: median / 90th pct / max | W_p at median (MJ/m3) | dT at median (K) | "
-          "1 - T*^m at median | at 90th pct |")
-    print("|---|---|---|---|---|---|---|")
+    print("| test | across | Df/D0 (98th pct) | Df/D0 outermost centre + l0/2 | ep face slab: median / 90th pct / max "
+          "| W_p at median (MJ/m3) | dT at median (K) | 1 - T*^m at median | at 90th pct |")
+    print("|---|---|---|---|---|---|---|---|---|")
 
     def heat(e):
         wp = JC["A"] * e + JC["B"] * e ** (JC["n"] + 1) / (JC["n"] + 1)          # GPa = 1e3 MJ/m3
@@ -514,10 +514,17 @@ def df_check(out, figdir):
             keep = d["mol"] > 0
             x, ep = d["x"][keep], d["ep"][keep]
             face = x[:, 2].min() - 0.5 * res["l0"]
-            e = ep[x[:, 2] < face + res["l0"]]
+            sl = x[:, 2] < face + res["l0"]
+            e = ep[sl]
             em, e90 = float(np.median(e)), float(np.percentile(e, 90))
             wp, dT, th = heat(em)
-            print(f"| {lab} | {n} | {em:.2f} / {e90:.2f} / {float(e.max()):.2f} | {wp * 1e3:.0f} | {dT:.0f} | "
+            rad = np.hypot(x[:, 0] - x[:, 0].mean(), x[:, 1] - x[:, 1].mean())
+            edge = 2 * (float(rad.max()) + 0.5 * res["l0"]) / res["D0"]
+            x0 = d["x0"]
+            edge0 = 2 * (float(np.hypot(x0[:, 0] - x0[:, 0].mean(), x0[:, 1] - x0[:, 1].mean()).max())
+                         + 0.5 * res["l0"]) / res["D0"]
+            dfp = next((fnum(r["Df_peer"]) for r in peer if r["test"] == lab and int(r["across"]) == n), None)
+            print(f"| {lab} | {n} | {fmt(dfp)} | {edge:.3f} (at rest {edge0:.3f}) | {em:.2f} / {e90:.2f} / {float(e.max()):.2f} | {wp * 1e3:.0f} | {dT:.0f} | "
                   f"{th:.2f} | {heat(e90)[2]:.2f} |")
 
 
