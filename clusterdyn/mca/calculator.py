@@ -20,6 +20,7 @@ import numpy as np
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 from ase.stress import full_3x3_to_voigt_6_stress
 
+from ..parallel import use_threads
 from . import kernels as K
 from .state import MCAState, _box
 
@@ -107,6 +108,7 @@ class MCA(Calculator):
         """Trial evaluation: a dict of arrays (forces, torques, tensors, trial pair forces)."""
         i_p, j_p, first_n, side_p, side_s, perm = st.pair_rows(atoms)
         n = len(atoms)
+        use_threads(n)        # the kernels' thread count (their results do not depend on it)
         P = st.npairs
         pos = np.ascontiguousarray(atoms.positions, dtype=np.float64)
         if st.dim == 2:
@@ -130,7 +132,9 @@ class MCA(Calculator):
         dtau_pc = np.empty((P, 3))
         taurot = np.empty((P, 2, 3))
         box_c, periodic_c = _box(atoms)
-        K.pair_geometry(pos, theta, thlast, i_p, j_p, st.dlast_pc, st.q0_p2, G_n, box_c,
+        rot = np.empty((n, 9))
+        K.rotation_constants(theta, thlast, rot)
+        K.pair_geometry(pos, rot, i_p, j_p, st.dlast_pc, st.q0_p2, G_n, box_c,
                         periodic_c, st.tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot)
         deps = np.empty((P, 2))
         dB = np.zeros(n)

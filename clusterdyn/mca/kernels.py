@@ -22,7 +22,7 @@ side ``side_s[k]``), so a parallel variant (prange) would never write to shared 
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..neighbors.image import image_component
 
@@ -45,10 +45,58 @@ def _rot3(vx, vy, vz, px, py, pz):
 
 
 @njit(cache=True)
-def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c,
+def _rot_prep(px, py, pz):
+    """The constants of R(phi) (Rodrigues, as :func:`_rot3`): (kx, ky, kz, cos, sin, identity)."""
+    ang = math.sqrt(px * px + py * py + pz * pz)
+    if ang < 1e-300:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, True
+    return px / ang, py / ang, pz / ang, math.cos(ang), math.sin(ang), False
+
+
+@njit(cache=True)
+def _rot_apply(vx, vy, vz, kx, ky, kz, c, s, ident):
+    """R v from :func:`_rot_prep`'s constants: the same operations as :func:`_rot3`, same bits."""
+    if ident:
+        return vx, vy, vz
+    kv = (kx * vx + ky * vy + kz * vz) * (1.0 - c)
+    return (vx * c + (ky * vz - kz * vy) * s + kx * kv,
+            vy * c + (kz * vx - kx * vz) * s + ky * kv,
+            vz * c + (kx * vy - ky * vx) * s + kz * kv)
+
+
+@njit(cache=True, parallel=True)
+def rotation_constants(theta_nc, thlast_nc, rot_n9):
+    """Per automaton, its rotation since the last commit ``phi = theta - theta_last`` (0:3) and
+    the constants of R(phi) (3:9, :func:`_rot_prep`; the last 1.0 where R is the identity):
+    computed once per automaton instead of once per pair side."""
+    for i in prange(theta_nc.shape[0]):
+        px = theta_nc[i, 0] - thlast_nc[i, 0]
+        py = theta_nc[i, 1] - thlast_nc[i, 1]
+        pz = theta_nc[i, 2] - thlast_nc[i, 2]
+        kx, ky, kz, c, s, ident = _rot_prep(px, py, pz)
+        rot_n9[i, 0] = px
+        rot_n9[i, 1] = py
+        rot_n9[i, 2] = pz
+        rot_n9[i, 3] = kx
+        rot_n9[i, 4] = ky
+        rot_n9[i, 5] = kz
+        rot_n9[i, 6] = c
+        rot_n9[i, 7] = s
+        rot_n9[i, 8] = 1.0 if ident else 0.0
+
+
+@njit(cache=True)
+def _rot_row(vx, vy, vz, rot_n9, i):
+    return _rot_apply(vx, vy, vz, rot_n9[i, 3], rot_n9[i, 4], rot_n9[i, 5], rot_n9[i, 6],
+                      rot_n9[i, 7], rot_n9[i, 8] != 0.0)
+
+
+@njit(cache=True, parallel=True)
+def pair_geometry(pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c,
                   tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c):
     """Separation, elongation and tangential increment of every pair since the last commit.
 
+    ``rot_n9``: :func:`rotation_constants` of the automata.
     Outputs: ``d_pc`` separation, ``r_p`` distance, ``dr_p = r - r_last``,
     ``arm_p2`` lever arms (``r`` split as q0: they sum to r, so torques conserve angular momentum),
     ``dtau_pc`` tangential increment ``2 G_i G_j du_t / (a_i G_j + a_j G_i)``
@@ -56,10 +104,10 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
     material points that were at the contact point at the last commit,
     ``du = d - (a_i R_i + a_j R_j) n_last`` (zero for any rigid motion),
     ``taurot_p2c`` the stored tangential forces rotated with the pair (minimal
-    rotation n_last -> n, then the mean spin about n).
+    rotation n_last -> n, then the mean spin about n).  Pairs in parallel (each writes its rows).
     """
     npair = i_p.shape[0]
-    for p in range(npair):
+    for p in prange(npair):
         i = i_p[p]
         j = j_p[p]
         dx = pos_nc[j, 0] - pos_nc[i, 0]
@@ -92,14 +140,14 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
         aj = rl * q0_p2[p, 1] / qs
         arm_p2[p, 0] = r * q0_p2[p, 0] / qs
         arm_p2[p, 1] = r * q0_p2[p, 1] / qs
-        pix = theta_nc[i, 0] - thlast_nc[i, 0]
-        piy = theta_nc[i, 1] - thlast_nc[i, 1]
-        piz = theta_nc[i, 2] - thlast_nc[i, 2]
-        pjx = theta_nc[j, 0] - thlast_nc[j, 0]
-        pjy = theta_nc[j, 1] - thlast_nc[j, 1]
-        pjz = theta_nc[j, 2] - thlast_nc[j, 2]
-        rix, riy, riz = _rot3(nlx, nly, nlz, pix, piy, piz)
-        rjx, rjy, rjz = _rot3(nlx, nly, nlz, pjx, pjy, pjz)
+        pix = rot_n9[i, 0]
+        piy = rot_n9[i, 1]
+        piz = rot_n9[i, 2]
+        pjx = rot_n9[j, 0]
+        pjy = rot_n9[j, 1]
+        pjz = rot_n9[j, 2]
+        rix, riy, riz = _rot_row(nlx, nly, nlz, rot_n9, i)
+        rjx, rjy, rjz = _rot_row(nlx, nly, nlz, rot_n9, j)
         ux = dx - ai * rix - aj * rjx
         uy = dy - ai * riy - aj * rjy
         uz = dz - ai * riz - aj * rjz
@@ -122,16 +170,20 @@ def pair_geometry(pos_nc, theta_nc, thlast_nc, i_p, j_p, dlast_pc, q0_p2, G_n, b
             ay *= f
             az *= f
         tw = 0.5 * ((pix + pjx) * nx + (piy + pjy) * ny + (piz + pjz) * nz)
+        # the two rotations' constants once for both sides (the same numbers as per side)
+        akx, aky, akz, ac, as_, aid = _rot_prep(ax, ay, az)
+        tkx, tky, tkz, tc, ts, tid = _rot_prep(tw * nx, tw * ny, tw * nz)
         for s in range(2):
-            tx, ty, tz = _rot3(tau_p2c[p, s, 0], tau_p2c[p, s, 1], tau_p2c[p, s, 2], ax, ay, az)
-            tx, ty, tz = _rot3(tx, ty, tz, tw * nx, tw * ny, tw * nz)
+            tx, ty, tz = _rot_apply(tau_p2c[p, s, 0], tau_p2c[p, s, 1], tau_p2c[p, s, 2],
+                                    akx, aky, akz, ac, as_, aid)
+            tx, ty, tz = _rot_apply(tx, ty, tz, tkx, tky, tkz, tc, ts, tid)
             tn = tx * nx + ty * ny + tz * nz
             taurot_p2c[p, s, 0] = tx - tn * nx
             taurot_p2c[p, s, 1] = ty - tn * ny
             taurot_p2c[p, s, 2] = tz - tn * nz
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
     """Split the elongation between the two automata (docs/theory.md 2.4).
 
@@ -143,7 +195,7 @@ def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
     checkerboard mode is about ``z (1 - 2G/3K) K / 4G`` (z neighbours): it
     diverged for nu >= 0.3 in our tests, so it is not used (docs/mca.md).
     """
-    for p in range(i_p.shape[0]):
+    for p in prange(i_p.shape[0]):
         if linked_p[p] == 0:
             deps_p2[p, 0] = 0.0
             deps_p2[p, 1] = 0.0
@@ -157,10 +209,10 @@ def split_strain(dr_p, q0_p2, A_n, i_p, j_p, linked_p, dB_n, deps_p2):
         deps_p2[p, 1] = (A_n[i] * dr_p[p] + qi * (dB_n[i] - dB_n[j])) / den
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP_n, dB_n):
     """Mean-stress increment of every automaton: ``dP = K sum_j dq_ij S_ij / Omega`` (MCA 8-9)."""
-    for i in range(first_n.shape[0] - 1):
+    for i in prange(first_n.shape[0] - 1):
         dv = 0.0
         for k in range(first_n[i], first_n[i + 1]):
             p = side_p[k]
@@ -170,11 +222,11 @@ def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega
         dB_n[i] = lk_n[i] * dP_n[i]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc,
                  sigt_p2, taut_p2c):
     """Elastic predictor of linked pairs: ``d sigma = (1-D)(2G d eps + (1-2G/3K) dP)``, ``d tau = (1-D) dtau``."""
-    for p in range(i_p.shape[0]):
+    for p in prange(i_p.shape[0]):
         if linked_p[p] == 0:
             continue
         i = i_p[p]
@@ -187,7 +239,7 @@ def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c
                 taut_p2c[p, s, a] = taurot_p2c[p, s, a] + f * dtau_pc[p, a]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c, dtau_pc,
                   sigt_p2, taut_p2c):
     """Unlinked pairs: repulsion only in contact (``h = r - r0 < 0``) and Coulomb friction.
@@ -196,7 +248,7 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
     ``M = K + 4G/3`` (the two half-automata in series, uniaxial strain);
     tangential force incremental, capped at ``mu |sigma|``; zero when apart.
     """
-    for p in range(i_p.shape[0]):
+    for p in prange(i_p.shape[0]):
         if linked_p[p] != 0:
             continue
         i = i_p[p]
@@ -227,7 +279,7 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
                     taut_p2c[p, s, a] *= sc
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
                    omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
     """Forces, torques, Love-Weber stress and elastic energy of every automaton.
@@ -240,14 +292,23 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
     ``sigma^i = (1/Omega_i) sum_j q_ij S (sigma_ij n + tau_ij) (x) n`` (symmetrised);
     ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
     """
-    for i in range(first_n.shape[0] - 1):
+    for i in prange(first_n.shape[0] - 1):
         fx = 0.0
         fy = 0.0
         fz = 0.0
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        st = np.zeros((3, 3))
+        # the tensor sum in nine scalars (no allocation per automaton)
+        s00 = 0.0
+        s01 = 0.0
+        s02 = 0.0
+        s10 = 0.0
+        s11 = 0.0
+        s12 = 0.0
+        s20 = 0.0
+        s21 = 0.0
+        s22 = 0.0
         for k in range(first_n[i], first_n[i + 1]):
             p = side_p[k]
             s = side_s[k]
@@ -279,15 +340,15 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
             tv0 = sg * nx + tau_p2c[p, s, 0]
             tv1 = sg * ny + tau_p2c[p, s, 1]
             tv2 = sg * nz + tau_p2c[p, s, 2]
-            st[0, 0] += w * tv0 * nx
-            st[0, 1] += w * tv0 * ny
-            st[0, 2] += w * tv0 * nz
-            st[1, 0] += w * tv1 * nx
-            st[1, 1] += w * tv1 * ny
-            st[1, 2] += w * tv1 * nz
-            st[2, 0] += w * tv2 * nx
-            st[2, 1] += w * tv2 * ny
-            st[2, 2] += w * tv2 * nz
+            s00 += w * tv0 * nx
+            s01 += w * tv0 * ny
+            s02 += w * tv0 * nz
+            s10 += w * tv1 * nx
+            s11 += w * tv1 * ny
+            s12 += w * tv1 * nz
+            s20 += w * tv2 * nx
+            s21 += w * tv2 * ny
+            s22 += w * tv2 * nz
         f_nc[i, 0] = fx
         f_nc[i, 1] = fy
         f_nc[i, 2] = fz
@@ -295,11 +356,18 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
         t_nc[i, 1] = ty
         t_nc[i, 2] = tz
         inv = 1.0 / omega_n[i]
-        for a in range(3):
-            for b in range(a, 3):
-                v = 0.5 * (st[a, b] + st[b, a]) * inv
-                s_ncc[i, a, b] = v
-                s_ncc[i, b, a] = v
+        s_ncc[i, 0, 0] = 0.5 * (s00 + s00) * inv
+        v = 0.5 * (s01 + s10) * inv
+        s_ncc[i, 0, 1] = v
+        s_ncc[i, 1, 0] = v
+        v = 0.5 * (s02 + s20) * inv
+        s_ncc[i, 0, 2] = v
+        s_ncc[i, 2, 0] = v
+        s_ncc[i, 1, 1] = 0.5 * (s11 + s11) * inv
+        v = 0.5 * (s12 + s21) * inv
+        s_ncc[i, 1, 2] = v
+        s_ncc[i, 2, 1] = v
+        s_ncc[i, 2, 2] = 0.5 * (s22 + s22) * inv
         P = (s_ncc[i, 0, 0] + s_ncc[i, 1, 1] + s_ncc[i, 2, 2]) / 3.0
         ss = 0.0
         for a in range(3):
@@ -309,7 +377,7 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
         e_n[i] = omega_n[i] * (ss / (4.0 * G_n[i]) + P * P / (2.0 * K_n[i]))
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def pair_damping(vel_nc, om_nc, i_p, j_p, d_pc, r_p, arm_p2, c_p, f_nc_out, t_nc_out,
                  first_n, side_p, side_s):
     """Viscous damping of the relative velocity at the contact point of every pair.
@@ -318,7 +386,7 @@ def pair_damping(vel_nc, om_nc, i_p, j_p, d_pc, r_p, arm_p2, c_p, f_nc_out, t_nc
     torques ``a n x f`` on both: momentum and angular momentum conserved.
     Writes per automaton (``f_nc_out``, ``t_nc_out`` overwritten).
     """
-    for i in range(first_n.shape[0] - 1):
+    for i in prange(first_n.shape[0] - 1):
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -390,7 +458,7 @@ def incidence(n, i_p, j_p):
     return cnt, side_p, side_s
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, side_s, omega_n,
                 G_n, K_n, e_n):
     """Elastic energy of every automaton from its pair state (eV), the energy whose
@@ -402,7 +470,7 @@ def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, sid
     this is ``sum_j G q S eps^2 + lambda dOmega^2/(2 Omega)`` plus the tangential
     springs.  Linked pairs only (contacts carry no stored energy here).
     """
-    for i in range(first_n.shape[0] - 1):
+    for i in prange(first_n.shape[0] - 1):
         P = P_n[i]
         G = G_n[i]
         K = K_n[i]
@@ -420,14 +488,14 @@ def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, sid
         e_n[i] = e / (4.0 * G) + lam * P * P * omega_n[i] / (2.0 * K * K)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
     """``ln sqrt(det B_i)``, ``B_i = sum_j q_ij S_ij d_ij (x) d_ij`` over the linked pairs of every
     automaton (large strain, docs/mca.md): under any affine motion of the neighbourhood,
     ``B -> F B F^T``, so the change of this number is exactly ``ln det F`` (an isochoric flow
     changes it by nothing at any strain, where the summed pair elongations change by O(strain^2)).
     NaN where the neighbourhood is flat (det B below 1e-9 of (tr B / 3)^3)."""
-    for i in range(first_n.shape[0] - 1):
+    for i in prange(first_n.shape[0] - 1):
         b00 = 0.0
         b01 = 0.0
         b02 = 0.0
