@@ -142,7 +142,7 @@ class MCA(Calculator):
                        st.S_p, st.linked_p, st.sig_p2, st.tau_p2c, st.D_p, st.r0_p, st.mu_p, G_n, K_n,
                        A_n, lk_n, M_n, omega_n, box_c, periodic_c, bool(st.flags["contacts"]),
                        np.empty((n, 9)), d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot, deps, dB, dP, sigt,
-                       taut, f, t, s, e)
+                       taut, np.empty((P, 3)), np.empty((P, 3)), np.empty((P, 3)), f, t, s, e)
         if st.dim == 2:
             f[:, 2] = 0.0
             t[:, :2] = 0.0

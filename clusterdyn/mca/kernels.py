@@ -565,13 +565,125 @@ def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
 
 
 
+@njit(cache=True, inline="always")
+def _pair_force_one(p, i_p, j_p, d_pc, r_p, S_p, q0_p2, sig_p2, tau_p2c, G_n, n_pc, g_pc, c_pc):
+    """The per-pair parts of :func:`_sums_one`, computed once per pair (not once per side):
+    ``n``, ``g = S (sigma_bar n + tau_bar)`` (the force on i; j gets ``-g``) and ``c = n x tau_bar``
+    (the torque per lever arm and area), with its operations (the same bits)."""
+    r = r_p[p]
+    nx = d_pc[p, 0] / r
+    ny = d_pc[p, 1] / r
+    nz = d_pc[p, 2] / r
+    S = S_p[p]
+    gi = G_n[i_p[p]]
+    gj = G_n[j_p[p]]
+    wden = q0_p2[p, 0] * gj + q0_p2[p, 1] * gi
+    w0 = q0_p2[p, 0] * gj / wden
+    w1 = 1.0 - w0
+    sb = w0 * sig_p2[p, 0] + w1 * sig_p2[p, 1]
+    tbx = w0 * tau_p2c[p, 0, 0] + w1 * tau_p2c[p, 1, 0]
+    tby = w0 * tau_p2c[p, 0, 1] + w1 * tau_p2c[p, 1, 1]
+    tbz = w0 * tau_p2c[p, 0, 2] + w1 * tau_p2c[p, 1, 2]
+    n_pc[p, 0] = nx
+    n_pc[p, 1] = ny
+    n_pc[p, 2] = nz
+    g_pc[p, 0] = S * (sb * nx + tbx)
+    g_pc[p, 1] = S * (sb * ny + tby)
+    g_pc[p, 2] = S * (sb * nz + tbz)
+    c_pc[p, 0] = ny * tbz - nz * tby
+    c_pc[p, 1] = nz * tbx - nx * tbz
+    c_pc[p, 2] = nx * tby - ny * tbx
+
+
+@njit(cache=True, inline="always")
+def _gather_one(i, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s, omega_n, G_n, K_n,
+                n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n):
+    """:func:`_sums_one` from the per-pair parts of :func:`_pair_force_one`, gathered in the
+    automaton's side order (``(-1) (S X)`` is ``(-S) X`` exactly: the same bits)."""
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    s00 = 0.0
+    s01 = 0.0
+    s02 = 0.0
+    s10 = 0.0
+    s11 = 0.0
+    s12 = 0.0
+    s20 = 0.0
+    s21 = 0.0
+    s22 = 0.0
+    for k in range(first_n[i], first_n[i + 1]):
+        p = side_p[k]
+        s = side_s[k]
+        nx = n_pc[p, 0]
+        ny = n_pc[p, 1]
+        nz = n_pc[p, 2]
+        S = S_p[p]
+        if s == 0:
+            fx += g_pc[p, 0]
+            fy += g_pc[p, 1]
+            fz += g_pc[p, 2]
+        else:
+            fx += -g_pc[p, 0]
+            fy += -g_pc[p, 1]
+            fz += -g_pc[p, 2]
+        a = arm_p2[p, s] * S
+        tx += a * c_pc[p, 0]
+        ty += a * c_pc[p, 1]
+        tz += a * c_pc[p, 2]
+        w = q0_p2[p, s] * S
+        sg = sig_p2[p, s]
+        tv0 = sg * nx + tau_p2c[p, s, 0]
+        tv1 = sg * ny + tau_p2c[p, s, 1]
+        tv2 = sg * nz + tau_p2c[p, s, 2]
+        s00 += w * tv0 * nx
+        s01 += w * tv0 * ny
+        s02 += w * tv0 * nz
+        s10 += w * tv1 * nx
+        s11 += w * tv1 * ny
+        s12 += w * tv1 * nz
+        s20 += w * tv2 * nx
+        s21 += w * tv2 * ny
+        s22 += w * tv2 * nz
+    f_nc[i, 0] = fx
+    f_nc[i, 1] = fy
+    f_nc[i, 2] = fz
+    t_nc[i, 0] = tx
+    t_nc[i, 1] = ty
+    t_nc[i, 2] = tz
+    inv = 1.0 / omega_n[i]
+    s_ncc[i, 0, 0] = 0.5 * (s00 + s00) * inv
+    v = 0.5 * (s01 + s10) * inv
+    s_ncc[i, 0, 1] = v
+    s_ncc[i, 1, 0] = v
+    v = 0.5 * (s02 + s20) * inv
+    s_ncc[i, 0, 2] = v
+    s_ncc[i, 2, 0] = v
+    s_ncc[i, 1, 1] = 0.5 * (s11 + s11) * inv
+    v = 0.5 * (s12 + s21) * inv
+    s_ncc[i, 1, 2] = v
+    s_ncc[i, 2, 1] = v
+    s_ncc[i, 2, 2] = 0.5 * (s22 + s22) * inv
+    P = (s_ncc[i, 0, 0] + s_ncc[i, 1, 1] + s_ncc[i, 2, 2]) / 3.0
+    ss = 0.0
+    for a in range(3):
+        for b in range(3):
+            dv = s_ncc[i, a, b] - (P if a == b else 0.0)
+            ss += dv * dv
+    e_n[i] = omega_n[i] * (ss / (4.0 * G_n[i]) + P * P / (2.0 * K_n[i]))
+
+
 def _trial_forces(pos_nc, theta_nc, thlast_nc, i_p, j_p, first_n, side_p, side_s, dlast_pc, q0_p2,
                   S_p, linked_p, sig_p2, tau_p2c, D_p, r0_p, mu_p, G_n, K_n, A_n, lk_n, M_n, omega_n,
                   box_c, periodic_c, contacts, rot_n9, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c,
-                  deps_p2, dB_n, dP_n, sigt_p2, taut_p2c, f_nc, t_nc, s_ncc, e_n):
+                  deps_p2, dB_n, dP_n, sigt_p2, taut_p2c, n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n):
     """The whole trial evaluation (docs/theory.md 2.2-2.5) in one call, five passes: rotations
     (automata), geometry and strain split (pairs), volume change (automata), trial pair forces
-    (pairs), sums (automata).  Every item writes only its own rows, with the operations of the
+    (pairs, with each pair's force and torque parts, ``n_pc, g_pc, c_pc``), sums gathered per
+    automaton in its side order (automata).  Every item writes only its own rows, with the operations of the
     single kernels above (the same bits, on any thread count); ``dB_n`` is zero during the split
     (the calculator's choice, see :func:`split_strain`) and then the automata's increments."""
     n = theta_nc.shape[0]
@@ -597,9 +709,10 @@ def _trial_forces(pos_nc, theta_nc, thlast_nc, i_p, j_p, first_n, side_p, side_s
             for s in range(2):
                 for a in range(3):
                     taut_p2c[p, s, a] = 0.0
+        _pair_force_one(p, i_p, j_p, d_pc, r_p, S_p, q0_p2, sigt_p2, taut_p2c, G_n, n_pc, g_pc, c_pc)
     for i in prange(n):
-        _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sigt_p2, taut_p2c, first_n, side_p,
-                  side_s, omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n)
+        _gather_one(i, S_p, q0_p2, arm_p2, sigt_p2, taut_p2c, first_n, side_p, side_s, omega_n, G_n, K_n,
+                    n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n)
 
 
 #: numba's parfor lowering of the loops ran faster on one thread than a plain serial jit of the
