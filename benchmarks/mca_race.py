@@ -1,13 +1,15 @@
 """The MCA race: MCA automaton-steps/s against the CD engine and two LAMMPS peers, and the MCA step
 by phase.
 
-    python benchmarks/mca_race.py                        # 1e4 and 1e5 particles, 3 interleaved repeats
+    python benchmarks/mca_race.py --sizes 1e4 --repeat 3              # 3 interleaved processes
+    python benchmarks/mca_race.py --sizes 1e5 --repeat 1 --rounds 3   # one build, 3 timed rounds
     python benchmarks/mca_race.py --sizes 1e4 --repeat 3 --steps 60
     python benchmarks/mca_race.py --profile 11           # the MCA step by phase, 11^3 fcc cells (5 324)
 
-**Statistic (decided before measuring):** per engine, size and thread count, the median of
-``--repeat`` (default 3) repeats, the repeats interleaved (every engine once, then again), each in
-its own process; the spread is reported as (min, max).  A rate is particle-steps per second of
+**Statistic (decided before measuring):** per engine, size and thread count, the median over all
+timed windows: ``--repeat`` processes per engine (the repeats interleaved: every engine once, then
+again), each timing ``--rounds`` windows (a large sample is built once and timed in rounds:
+``--repeat 1 --rounds 3``); the spread is reported as (min, max).  A rate is particle-steps per second of
 the stepping loop alone (set-up, compilation and the first steps outside the window).
 
 **Samples and loading (elastic):**
@@ -76,21 +78,26 @@ def _mca_sample(cells):
     return at, dyn
 
 
-def _windows(dyn, natoms, steps):
-    """Rates on one and two threads in the same process: windows of ``steps`` on 1, 2, 2, 1 threads
-    (both counts in the same spell of a shared machine's load); the mean of each count's two."""
+def _windows(dyn, natoms, steps, rounds=1):
+    """Rates on one and two threads in the same process: ``rounds`` rounds of windows of ``steps``
+    on 1, 2, 2, 1 threads (both counts in the same spell of a shared machine's load); per round,
+    the mean of each count's two windows."""
     import clusterdyn.parallel as P
-    rates = {1: [], 2: []}
-    for th in (1, 2, 2, 1):
-        P.set_max_threads(th)
-        t = time.perf_counter()
-        dyn.run(steps)
-        rates[th].append(natoms * steps / (time.perf_counter() - t))
+    r1, r2 = [], []
+    for _ in range(rounds):
+        rates = {1: [], 2: []}
+        for th in (1, 2, 2, 1):
+            P.set_max_threads(th)
+            t = time.perf_counter()
+            dyn.run(steps)
+            rates[th].append(natoms * steps / (time.perf_counter() - t))
+        r1.append(sum(rates[1]) / 2)
+        r2.append(sum(rates[2]) / 2)
     P.set_max_threads(None)
-    return {"rate": sum(rates[1]) / 2, "rate2": sum(rates[2]) / 2}
+    return {"rates": r1, "rates2": r2}
 
 
-def worker_mca(n, steps, threads):
+def worker_mca(n, steps, rounds):
     t = time.perf_counter()
     _, dyn = _mca_sample(3)             # compile or load every kernel of the step
     dyn.run(5)
@@ -102,7 +109,7 @@ def worker_mca(n, steps, threads):
     at, dyn = _mca_sample(cells_for(n))
     build_s = time.perf_counter() - t
     dyn.run(3)
-    out = _windows(dyn, len(at), steps)
+    out = _windows(dyn, len(at), steps, rounds)
     C.trim()
     rss = C.status("VmRSS") - rss0
     out.update({"N": len(at), "pairs": dyn.state.npairs, "build_s": build_s, "compile_s": compile_s,
@@ -111,14 +118,14 @@ def worker_mca(n, steps, threads):
 
 
 # --------------------------------------------------------------------------------- CD
-def worker_cd(n, steps, threads):
+def worker_cd(n, steps, rounds):
     from clusterdyn import units
     from clusterdyn.scenes.shock import build_shock
     C.warm_kernels()
     nx = max(2, int(round(n / 1024)))
     s = build_shock(size=(nx, 16, 16), u=3 * units.km_s, J=None)
     s.dyn.run(10)
-    out = _windows(s.dyn, len(s.atoms), steps)
+    out = _windows(s.dyn, len(s.atoms), steps, rounds)
     out["N"] = len(s.atoms)
     return out
 
@@ -131,15 +138,17 @@ def _lammps():
     return lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
 
 
-def _loop_rate(lmp, natoms, steps):
+def _loop_rate(lmp, natoms, steps, rounds):
     lmp.command("run 5")
-    t = time.perf_counter()
-    lmp.command(f"run {steps}")
-    wall = time.perf_counter() - t
-    return {"N": natoms, "rate": natoms * steps / wall}
+    rates = []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        lmp.command(f"run {steps}")
+        rates.append(natoms * steps / (time.perf_counter() - t))
+    return {"N": natoms, "rates": rates}
 
 
-def worker_bpm(n, steps, threads):
+def worker_bpm(n, steps, rounds):
     cells = cells_for(n)
     lmp = _lammps()
     # LAMMPS' examples/bpm/impact/in.bpm.impact.rotational, the plate and projectile replaced by
@@ -169,10 +178,10 @@ velocity all ramp vx 0.0025 -0.0025 x 0 {cells} sum no
 timestep 0.05
 thermo 0""".splitlines():
         lmp.command(c)
-    return _loop_rate(lmp, lmp.get_natoms(), steps)
+    return _loop_rate(lmp, lmp.get_natoms(), steps, rounds)
 
 
-def worker_peri(n, steps, threads):
+def worker_peri(n, steps, rounds):
     k = max(3, int(round(n ** (1.0 / 3.0))))
     dx = 0.0005
     lmp = _lammps()
@@ -195,7 +204,7 @@ fix 1 all nve
 timestep 1.0e-7
 thermo 0""".splitlines():
         lmp.command(c)
-    return _loop_rate(lmp, lmp.get_natoms(), steps)
+    return _loop_rate(lmp, lmp.get_natoms(), steps, rounds)
 
 
 WORKERS = {"mca": worker_mca, "cd": worker_cd, "bpm": worker_bpm, "peri": worker_peri}
@@ -279,9 +288,9 @@ def profile(cells, steps):
 
 
 # --------------------------------------------------------------------------------- driver
-def run_worker(engine, n, steps, threads):
+def run_worker(engine, n, steps, rounds):
     p = subprocess.run([sys.executable, __file__, "--worker", engine, "--n", str(n), "--steps", str(steps),
-                        "--threads", str(threads)], capture_output=True, text=True)
+                        "--rounds", str(rounds)], capture_output=True, text=True)
     if p.returncode:
         return {"error": (p.stderr.strip().splitlines() or ["?"])[-1]}
     return json.loads(p.stdout.strip().splitlines()[-1])
@@ -296,10 +305,10 @@ def main():
     ap.add_argument("--profile", type=int, default=0, help="profile the MCA step on this many fcc cells a side")
     ap.add_argument("--worker")
     ap.add_argument("--n", type=float)
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--rounds", type=int, default=1, help="timed windows (rounds) per process")
     a = ap.parse_args()
     if a.worker:
-        print(json.dumps(WORKERS[a.worker](int(a.n), a.steps, a.threads)))
+        print(json.dumps(WORKERS[a.worker](int(a.n), a.steps, a.rounds)))
         return
     C.RESULTS.mkdir(parents=True, exist_ok=True)
     if a.profile:
@@ -325,11 +334,11 @@ def main():
     for rep in range(a.repeat):
         for (e, n, th) in configs:
             steps = a.steps or max(10, int(2e6 / n))
-            r = run_worker(e, n, steps, th)
+            r = run_worker(e, n, steps, a.rounds)
             r["load"] = os.getloadavg()[0]
             res[(e, n, th)].append(r)
             print(rep, e, n, th, json.dumps(r), flush=True)
-    lines = ["| engine | N | threads | particle-steps/s (median) | min | max | note |", "|---|---|---|---|---|---|---|"]
+    lines = ["| engine | N | threads | particle-steps/s (median) | min | max | windows; note |", "|---|---|---|---|---|---|---|"]
     out = []
     for (e, n, th), rs in res.items():
         ok = [r for r in rs if "rate" in r]
@@ -340,15 +349,15 @@ def main():
         if e == "mca":
             note = (f"set-up {statistics.median(r['build_s'] for r in ok):.1f} s, "
                     f"{statistics.median(r['bytes_per_particle'] for r in ok):.0f} B/automaton")
-        for key, nth in (("rate", 1), ("rate2", 2)):
+        for key, nth in (("rates", 1), ("rates2", 2)):
             if key not in ok[0]:
                 continue
-            rates = [r[key] for r in ok]
+            rates = [x for r in ok for x in r[key]]
             lines.append(f"| {e} | {ok[0]['N']} | {nth} | {statistics.median(rates):.3g} | {min(rates):.3g} | "
-                         f"{max(rates):.3g} | {note} |")
+                         f"{max(rates):.3g} | {len(rates)} windows; {note} |")
         out.append({"engine": e, "n": n, "threads": th, "runs": rs})
     lines.append(f"\nload average at the end: {os.getloadavg()[0]:.1f} (2 cores)")
-    C.write_report(C.RESULTS / "mca_race", out, lines)
+    C.write_report(C.RESULTS / ("mca_race_" + "_".join(f"{n:.0e}" for n in sizes)), out, lines)
     print("\n".join(lines))
 
 
