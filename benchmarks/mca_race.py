@@ -296,6 +296,39 @@ def run_worker(engine, n, steps, rounds):
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+def summarise(res):
+    """The table (and the JSON records) of ``{(engine, n, 1): [worker results]}``."""
+    lines = ["| engine | N | threads | particle-steps/s (median) | min | max | windows; note |", "|---|---|---|---|---|---|---|"]
+    out = []
+    for (e, n, th), rs in res.items():
+        ok = [r for r in rs if "rates" in r]
+        if not ok:
+            lines.append(f"| {e} | {n:.0e} | {th} | failed | | | {rs[0].get('error', '')} |")
+            continue
+        note = ""
+        if e == "mca":
+            note = (f"set-up {statistics.median(r['build_s'] for r in ok):.1f} s, "
+                    f"{statistics.median(r['bytes_per_particle'] for r in ok):.0f} B/automaton")
+        for key, nth in (("rates", 1), ("rates2", 2)):
+            if key not in ok[0]:
+                continue
+            rates = [x for r in ok for x in r[key]]
+            lines.append(f"| {e} | {ok[0]['N']} | {nth} | {statistics.median(rates):.3g} | {min(rates):.3g} | "
+                         f"{max(rates):.3g} | {len(rates)} windows; {note} |")
+        out.append({"engine": e, "n": n, "threads": th, "runs": rs})
+    # MCA against each engine, window by window (the same repeat and round: the same spell of load)
+    for (e, n, th), rs in res.items():
+        mca = res.get(("mca", n, th))
+        if e == "mca" or not mca:
+            continue
+        rat = [a / b for rm, ro in zip(mca, rs) if "rates" in rm and "rates" in ro
+               for a, b in zip(rm["rates"], ro["rates"])]
+        if rat:
+            lines.append(f"\nMCA / {e} at {n:.0e}, one thread, window by window: "
+                         + ", ".join(f"{x:.3g}" for x in rat) + f" (median {statistics.median(rat):.3g})")
+    return out, lines
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1e4,1e5")
@@ -303,6 +336,7 @@ def main():
     ap.add_argument("--steps", type=int, default=0, help="steps per window (default: 2e6 / N, at least 10)")
     ap.add_argument("--engines", default="mca,cd,bpm,peri")
     ap.add_argument("--profile", type=int, default=0, help="profile the MCA step on this many fcc cells a side")
+    ap.add_argument("--from-log", help="summarise the lines a run printed (a run's stdout)")
     ap.add_argument("--worker")
     ap.add_argument("--n", type=float)
     ap.add_argument("--rounds", type=int, default=1, help="timed windows (rounds) per process")
@@ -311,6 +345,14 @@ def main():
         print(json.dumps(WORKERS[a.worker](int(a.n), a.steps, a.rounds)))
         return
     C.RESULTS.mkdir(parents=True, exist_ok=True)
+    if a.from_log:
+        res = {}
+        for line in Path(a.from_log).read_text().splitlines():
+            f = line.split(" ", 4)
+            if len(f) == 5 and f[0].isdigit():
+                res.setdefault((f[1], int(f[2]), 1), []).append(json.loads(f[4]))
+        print("\n".join(summarise(res)[1]))
+        return
     if a.profile:
         r = profile(a.profile, a.steps or 100)
         lines = [f"MCA step by phase: {r['N']} automata, {r['pairs']} pairs, {r['steps']} steps "
@@ -338,24 +380,7 @@ def main():
             r["load"] = os.getloadavg()[0]
             res[(e, n, th)].append(r)
             print(rep, e, n, th, json.dumps(r), flush=True)
-    lines = ["| engine | N | threads | particle-steps/s (median) | min | max | windows; note |", "|---|---|---|---|---|---|---|"]
-    out = []
-    for (e, n, th), rs in res.items():
-        ok = [r for r in rs if "rate" in r]
-        if not ok:
-            lines.append(f"| {e} | {n:.0e} | {th} | failed | | | {rs[0].get('error', '')} |")
-            continue
-        note = ""
-        if e == "mca":
-            note = (f"set-up {statistics.median(r['build_s'] for r in ok):.1f} s, "
-                    f"{statistics.median(r['bytes_per_particle'] for r in ok):.0f} B/automaton")
-        for key, nth in (("rates", 1), ("rates2", 2)):
-            if key not in ok[0]:
-                continue
-            rates = [x for r in ok for x in r[key]]
-            lines.append(f"| {e} | {ok[0]['N']} | {nth} | {statistics.median(rates):.3g} | {min(rates):.3g} | "
-                         f"{max(rates):.3g} | {len(rates)} windows; {note} |")
-        out.append({"engine": e, "n": n, "threads": th, "runs": rs})
+    out, lines = summarise(res)
     lines.append(f"\nload average at the end: {os.getloadavg()[0]:.1f} (2 cores)")
     C.write_report(C.RESULTS / ("mca_race_" + "_".join(f"{n:.0e}" for n in sizes)), out, lines)
     print("\n".join(lines))
