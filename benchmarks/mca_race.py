@@ -234,6 +234,7 @@ def profile(cells, steps):
         def g(*a):
             if keep:
                 cap[name] = a
+                cap["calls"] = cap.get("calls", 0) + 1
             t0 = time.perf_counter()
             r = f(*a)
             T[label] = T.get(label, 0.0) + time.perf_counter() - t0
@@ -245,10 +246,11 @@ def profile(cells, steps):
     wrap(K, "max_linked_strain", "strain check")
     dyn.run(3)
     T.clear()
+    cap["calls"] = 0
     t = time.perf_counter()
     dyn.run(steps)
     total = time.perf_counter() - t
-    ncall = dyn.nsteps
+    ncall = cap["calls"]
     a = cap["trial_forces"]
     (pos, th, thl, i_p, j_p, first_n, side_p, side_s, dlast, q0, S, linked, sig, tau, D, r0, mu, G_n,
      K_n, A_n, lk_n, M_n, om, box, per, contacts, rot, d_pc, r_p, dr_p, arm, dtau, taurot, deps, dB,

@@ -98,7 +98,8 @@ def _rot_row(vx, vy, vz, rot_n9, i):
 
 
 @njit(cache=True, inline="always")
-def _geometry_one(p, pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c, tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c):
+def _geometry_one(p, pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c, tau_p2c,
+                  d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c):
     """Pair p of :func:`pair_geometry`."""
     i = i_p[p]
     j = j_p[p]
@@ -191,7 +192,8 @@ def pair_geometry(pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodi
     rotation n_last -> n, then the mean spin about n).  Pairs in parallel (each writes its rows).
     """
     for p in prange(i_p.shape[0]):
-        _geometry_one(p, pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c, tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c)
+        _geometry_one(p, pos_nc, rot_n9, i_p, j_p, dlast_pc, q0_p2, G_n, box_c, periodic_c, tau_p2c,
+                      d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot_p2c)
 
 
 @njit(cache=True, inline="always")
@@ -246,7 +248,8 @@ def volume_change(deps_p2, q0_p2, S_p, first_n, side_p, side_s, K_n, lk_n, omega
 
 
 @njit(cache=True, inline="always")
-def _trial_linked_one(p, i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc, sigt_p2, taut_p2c):
+def _trial_linked_one(p, i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc,
+                      sigt_p2, taut_p2c):
     """Pair p of :func:`trial_linked`."""
     if linked_p[p] == 0:
         return
@@ -265,11 +268,13 @@ def trial_linked(i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c
                  sigt_p2, taut_p2c):
     """Elastic predictor of linked pairs: ``d sigma = (1-D)(2G d eps + (1-2G/3K) dP)``, ``d tau = (1-D) dtau``."""
     for p in prange(i_p.shape[0]):
-        _trial_linked_one(p, i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c, dtau_pc, sigt_p2, taut_p2c)
+        _trial_linked_one(p, i_p, j_p, linked_p, sig_p2, deps_p2, dB_n, A_n, D_p, taurot_p2c,
+                          dtau_pc, sigt_p2, taut_p2c)
 
 
 @njit(cache=True, inline="always")
-def _trial_contact_one(p, i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c, dtau_pc, sigt_p2, taut_p2c):
+def _trial_contact_one(p, i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c,
+                       dtau_pc, sigt_p2, taut_p2c):
     """Pair p of :func:`trial_contact`."""
     if linked_p[p] != 0:
         return
@@ -311,11 +316,13 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
     tangential force incremental, capped at ``mu |sigma|``; zero when apart.
     """
     for p in prange(i_p.shape[0]):
-        _trial_contact_one(p, i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c, dtau_pc, sigt_p2, taut_p2c)
+        _trial_contact_one(p, i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_p2c,
+                           dtau_pc, sigt_p2, taut_p2c)
 
 
 @njit(cache=True, inline="always")
-def _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s, omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
+def _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
+              omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
     """Item i of :func:`automaton_sums`."""
     fx = 0.0
     fy = 0.0
@@ -415,7 +422,8 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
     ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
     """
     for i in prange(first_n.shape[0] - 1):
-        _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s, omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n)
+        _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p,
+                  side_s, omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n)
 
 
 @njit(cache=True, parallel=True)
@@ -507,7 +515,8 @@ def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, sid
 
     ``e_i = sum_j q_ij S_ij [(sigma_ij - (lambda/K) P_i)^2 + |tau_ij|^2] / (4 G_i)
     + lambda P_i^2 Omega_i / (2 K_i^2)``, ``P_i`` the automaton's mean stress
-    (from its volume change, accumulated by the dynamics), lambda = K - 2G/3: with ``sigma_ij = 2G eps_ij + (lambda/K) P_i``
+    (from its volume change, accumulated by the dynamics),
+     lambda = K - 2G/3: with ``sigma_ij = 2G eps_ij + (lambda/K) P_i``
     this is ``sum_j G q S eps^2 + lambda dOmega^2/(2 Omega)`` plus the tangential
     springs.  Linked pairs only (contacts carry no stored energy here).
     """
@@ -683,7 +692,8 @@ def _trial_forces(pos_nc, theta_nc, thlast_nc, i_p, j_p, first_n, side_p, side_s
     """The whole trial evaluation (docs/theory.md 2.2-2.5) in one call, five passes: rotations
     (automata), geometry and strain split (pairs), volume change (automata), trial pair forces
     (pairs, with each pair's force and torque parts, ``n_pc, g_pc, c_pc``), sums gathered per
-    automaton in its side order (automata).  Every item writes only its own rows, with the operations of the
+    automaton in its side order (automata).  Every item writes only its own rows,
+                                 with the operations of the
     single kernels above (the same bits, on any thread count); ``dB_n`` is zero during the split
     (the calculator's choice, see :func:`split_strain`) and then the automata's increments."""
     n = theta_nc.shape[0]

@@ -79,5 +79,4 @@ def test_hardening_bisection_finds_the_scans_segment():
             want = _scan(x, tab_e[m], tab_s[m])
             assert got[0] == want[0] and got[1] == want[1]
     with pytest.raises(InputError, match="ascending"):
-        from clusterdyn.materials import Material  # noqa: F401
         hardening_table(type("M", (), {"extra": {}, "sigma_y": 1.0, "hardening": [[0.0, 0.2, 0.1], [1, 2, 3]]})())
