@@ -12,11 +12,15 @@ The force on i is ``S (sigma_bar n + tau_bar)`` with the stiffness-weighted
 means over the two sides, the force on j its opposite: linear and angular momentum are
 conserved pair by pair.
 
-All kernels are module-level serial ``@njit(cache=True)`` (the samples MCA runs here are
-small; thread start-up costs more than it saves below ~1e5 pairs); per-automaton sums go
-through the incidence lists ``first_n/side_p/side_s`` (CSR: automaton i
+All kernels are module-level ``@njit(cache=True)``; the loops over pairs and automata are
+``prange`` loops (``parallel=True``; the thread count is :func:`clusterdyn.parallel.use_threads`'s,
+one thread below 8 192 automata) in which every item writes only its own rows: per-automaton sums
+go through the incidence lists ``first_n/side_p/side_s`` (CSR: automaton i
 owns sides ``k in range(first_n[i], first_n[i+1])`` = pair ``side_p[k]``,
-side ``side_s[k]``), so a parallel variant (prange) would never write to shared entries.
+side ``side_s[k]``) in a fixed order, so the results are the same bits on any thread count.
+The calculator's evaluation is one call, :func:`trial_forces`, which runs the passes of the
+single kernels (:func:`pair_geometry`, :func:`split_strain`, :func:`volume_change`,
+:func:`trial_linked`, :func:`trial_contact`, :func:`automaton_sums`) with their operations.
 """
 
 import math
@@ -515,8 +519,7 @@ def pair_energy(sig_p2, tau_p2c, q0_p2, S_p, linked_p, P_n, first_n, side_p, sid
 
     ``e_i = sum_j q_ij S_ij [(sigma_ij - (lambda/K) P_i)^2 + |tau_ij|^2] / (4 G_i)
     + lambda P_i^2 Omega_i / (2 K_i^2)``, ``P_i`` the automaton's mean stress
-    (from its volume change, accumulated by the dynamics),
-     lambda = K - 2G/3: with ``sigma_ij = 2G eps_ij + (lambda/K) P_i``
+    (from its volume change, accumulated by the dynamics), lambda = K - 2G/3: with ``sigma_ij = 2G eps_ij + (lambda/K) P_i``
     this is ``sum_j G q S eps^2 + lambda dOmega^2/(2 Omega)`` plus the tangential
     springs.  Linked pairs only (contacts carry no stored energy here).
     """
@@ -692,10 +695,10 @@ def _trial_forces(pos_nc, theta_nc, thlast_nc, i_p, j_p, first_n, side_p, side_s
     """The whole trial evaluation (docs/theory.md 2.2-2.5) in one call, five passes: rotations
     (automata), geometry and strain split (pairs), volume change (automata), trial pair forces
     (pairs, with each pair's force and torque parts, ``n_pc, g_pc, c_pc``), sums gathered per
-    automaton in its side order (automata).  Every item writes only its own rows,
-                                 with the operations of the
-    single kernels above (the same bits, on any thread count); ``dB_n`` is zero during the split
-    (the calculator's choice, see :func:`split_strain`) and then the automata's increments."""
+    automaton in its side order (automata).  Every item writes only its own rows, with the
+    operations of the single kernels above (the same bits, on any thread count); ``dB_n`` is zero
+    during the split (the calculator's choice, see :func:`split_strain`) and then the automata's
+    increments."""
     n = theta_nc.shape[0]
     for i in prange(n):
         _rot_one(i, theta_nc, thlast_nc, rot_n9)
