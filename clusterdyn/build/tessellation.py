@@ -23,12 +23,40 @@ against them); for other shapes carved from a box the surface cells are
 closed at the box faces.
 """
 
+import hashlib
 import math
 
 import numpy as np
 from scipy.spatial import Voronoi
 
 from ..errors import InputError
+
+
+#: the last tessellation made, by a digest of its inputs: building an MCA sample tessellates the
+#: same centres twice (the masses in ``mca_packing``, then the MCA state), and the second call
+#: takes the first's result (copies of its arrays: the same numbers)
+_LAST = {}
+
+
+def _key(*arrays_and_values):
+    h = hashlib.blake2b(digest_size=20)
+    for a in arrays_and_values:
+        if isinstance(a, np.ndarray):
+            h.update(str((a.dtype, a.shape)).encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+        else:
+            h.update(repr(a).encode())
+    return h.digest()
+
+
+def _cached(kind, key, make):
+    hit = _LAST.get(kind)
+    if hit is None or hit[0] != key:
+        _LAST.clear()              # one geometry held at a time
+        hit = (key, make())
+        _LAST[kind] = hit
+    return {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in hit[1].items()}
+
 
 
 def _polygon_area_3d(pts, normal):
@@ -62,6 +90,15 @@ def sample_planes(positions, radius, cell, pbc, dim):
 
 
 def tessellate(positions, radius, cell, pbc, dim=3):
+    """Voronoi pairs and geometry of a packing (see :func:`_tessellate`; the last result is
+    reused for the same inputs)."""
+    pos = np.asarray(positions, float)
+    rad = np.asarray(radius, float)
+    key = _key(pos, rad, np.asarray(cell, float), np.asarray(pbc, bool), int(dim))
+    return _cached("box", key, lambda: _tessellate(pos, rad, cell, pbc, dim))
+
+
+def _tessellate(positions, radius, cell, pbc, dim=3):
     """Voronoi pairs and geometry of a packing.
 
     Parameters
@@ -254,6 +291,15 @@ def _ridge_areas(ridge_vertices, vert, normals, dim):
 
 
 def tessellate_body(positions, radius, dim=3, gap=0.85):
+    """Voronoi pairs and geometry of a body of any shape (see :func:`_tessellate_body`; the last
+    result is reused for the same inputs)."""
+    pos = np.asarray(positions, float)
+    rad = np.asarray(radius, float)
+    key = _key(pos, rad, int(dim), float(gap))
+    return _cached("body", key, lambda: _tessellate_body(pos, rad, dim, gap))
+
+
+def _tessellate_body(positions, radius, dim=3, gap=0.85):
     """Voronoi pairs and geometry of a deformed body of any shape (no periodic axes).
 
     The re-tessellation of large-strain MCA (docs/theory.md 2.7): the body is

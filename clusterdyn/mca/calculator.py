@@ -24,6 +24,7 @@ import numpy as np
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 from ase.stress import full_3x3_to_voigt_6_stress
 
+from ..parallel import use_threads
 from . import kernels as K
 from .state import MCAState, _box
 
@@ -205,6 +206,7 @@ class MCA(Calculator):
         """Trial evaluation: a dict of arrays (forces, torques, tensors, trial pair forces)."""
         i_p, j_p, first_n, side_p, side_s, perm = st.pair_rows(atoms)
         n = len(atoms)
+        use_threads(n)        # the kernels' thread count (their results do not depend on it)
         P = st.npairs
         pos = np.ascontiguousarray(atoms.positions, dtype=np.float64)
         if st.dim == 2:
@@ -213,48 +215,37 @@ class MCA(Calculator):
                 theta[:, 2] = atoms.arrays["theta"][:, 2]
         else:
             theta = np.ascontiguousarray(atoms.arrays.get("theta", np.zeros((n, 3))), dtype=np.float64)
-        thlast = np.ascontiguousarray(st.thlast_nc[perm])
-        omega_n = np.ascontiguousarray(st.omega_n[perm])
-        mid = st.mat_id_n[perm]
-        G_n = st.G_m[mid]
-        K_n = st.K_m[mid]
-        A_n = 2.0 * G_n
-        lk_n = 1.0 - 2.0 * G_n / (3.0 * K_n)
-        M_n = K_n + 4.0 * G_n / 3.0
+        perm, ident, G_n, K_n, A_n, lk_n, M_n, omega_n = st.automaton_constants(atoms)
+        thlast = st.thlast_nc if ident else np.ascontiguousarray(st.thlast_nc[perm])
+        box_c, periodic_c = _box(atoms)
         d_pc = np.empty((P, 3))
         r_p = np.empty(P)
         dr_p = np.empty(P)
         arm_p2 = np.empty((P, 2))
         dtau_pc = np.empty((P, 3))
         taurot = np.empty((P, 2, 3))
-        box_c, periodic_c = _box(atoms)
-        K.pair_geometry(pos, theta, thlast, i_p, j_p, st.dlast_pc, st.q0_p2, G_n, box_c,
-                        periodic_c, st.tau_p2c, d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot)
         deps = np.empty((P, 2))
-        dB = np.zeros(n)
+        dB = np.empty(n)
         dP = np.empty(n)
-        # split by stiffness (force balance of the 2G eps parts); the mean-stress terms enter
-        # the pair force as the stiffness-weighted mean of the two sides (see docs/mca.md)
-        K.split_strain(dr_p, st.q0_p2, A_n, i_p, j_p, st.linked_p, dB, deps)
-        K.volume_change(deps, st.q0_p2, st.S_p, first_n, side_p, side_s, K_n, lk_n, omega_n, dP, dB)
-        sigt = np.zeros((P, 2))
-        taut = np.zeros((P, 2, 3))
-        K.trial_linked(i_p, j_p, st.linked_p, st.sig_p2, deps, dB, A_n, st.D_p, taurot, dtau_pc,
-                       sigt, taut)
-        if st.flags["contacts"]:
-            K.trial_contact(i_p, j_p, st.linked_p, d_pc, r_p, st.r0_p, st.q0_p2, M_n, st.mu_p,
-                            taurot, dtau_pc, sigt, taut)
+        sigt = np.empty((P, 2))
+        taut = np.empty((P, 2, 3))
         f = np.empty((n, 3))
         t = np.empty((n, 3))
         s = np.empty((n, 3, 3))
         e = np.empty(n)
-        K.automaton_sums(i_p, j_p, d_pc, r_p, st.S_p, st.q0_p2, arm_p2, sigt, taut, first_n, side_p,
-                         side_s, omega_n, G_n, K_n, f, t, s, e)
+        # one call: rotations, geometry, strain split by stiffness (force balance of the 2G eps
+        # parts; the mean-stress terms enter the pair force as the stiffness-weighted mean of the
+        # two sides, docs/mca.md), volume change, trial pair forces, sums (kernels.trial_forces)
+        K.trial_forces(pos, theta, thlast, i_p, j_p, first_n, side_p, side_s, st.dlast_pc, st.q0_p2,
+                       st.S_p, st.linked_p, st.sig_p2, st.tau_p2c, st.D_p, st.r0_p, st.mu_p, G_n, K_n,
+                       A_n, lk_n, M_n, omega_n, box_c, periodic_c, bool(st.flags["contacts"]),
+                       np.empty((n, 9)), d_pc, r_p, dr_p, arm_p2, dtau_pc, taurot, deps, dB, dP, sigt,
+                       taut, np.empty((P, 3)), np.empty((P, 3)), np.empty((P, 3)), f, t, s, e)
         if st.dim == 2:
             f[:, 2] = 0.0
             t[:, :2] = 0.0
-        bad = ~np.isfinite(f).all(axis=1)
-        if bad.any():
+        if not np.isfinite(np.sum(f)):
+            bad = ~np.isfinite(f).all(axis=1)
             from ..errors import InstabilityError
             rows = np.nonzero(bad)[0]
             raise InstabilityError("non-finite MCA force", step=st.step,

@@ -488,10 +488,8 @@ class MCADynamics(MolecularDynamics):
         if self.remesh_every and st.step % self.remesh_every == 0:
             return True
         if self.remesh_strain is not None:
-            lk = st.linked_p == 1
-            if lk.any():
-                strain = np.abs(out["r_p"][lk] - st.r0_p[lk]) / st.r0_p[lk]
-                return bool(strain.max() > self.remesh_strain)
+            m, _ = K.max_linked_strain(out["r_p"], st.r0_p, st.linked_p)
+            return bool(m > self.remesh_strain)
         return False
 
     def remesh(self):
@@ -615,18 +613,14 @@ class MCADynamics(MolecularDynamics):
 
     def _check(self, out):
         st = self.state
-        lk = st.linked_p == 1
-        if lk.any():
-            strain = np.abs(out["r_p"][lk] - st.r0_p[lk]) / st.r0_p[lk]
-            k = int(np.argmax(strain))
-            if strain[k] > 0.5:
-                p = np.nonzero(lk)[0][k]
-                raise InstabilityError(
-                    "a linked pair stretched or compressed by more than half its rest distance: "
-                    f"unstable; reduce the time step (now {self.dt / units.ns:.4g} ns, default "
-                    f"{default_timestep(self.atoms, st.materials) / units.ns:.4g} ns) or the loading rate",
-                    step=st.step, particles=st.pid_p2[p], quantity="pair strain",
-                    value=float(strain[k]), limit=0.5)
+        m, p = K.max_linked_strain(out["r_p"], st.r0_p, st.linked_p)
+        if m > 0.5:
+            raise InstabilityError(
+                "a linked pair stretched or compressed by more than half its rest distance: "
+                f"unstable; reduce the time step (now {self.dt / units.ns:.4g} ns, default "
+                f"{default_timestep(self.atoms, st.materials) / units.ns:.4g} ns) or the loading rate",
+                step=st.step, particles=st.pid_p2[p], quantity="pair strain",
+                value=float(m), limit=0.5)
 
     # ------------------------------------------------------------------ energies
     def kinetic_energy(self):

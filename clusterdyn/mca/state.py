@@ -285,8 +285,9 @@ class MCAState:
     def pair_rows(self, atoms):
         """(i_p, j_p, first_n, side_p, side_s, perm_n): rows of the current Atoms (cached by ids)."""
         ids = np.asarray(atoms.arrays["id"], np.int64)
-        key = (ids.tobytes(), self.npairs, self.version_pairs)
-        if self._inc_key != key:
+        key = (self.npairs, self.version_pairs)
+        if self._inc_key != key or not np.array_equal(ids, self._inc_ids):
+            self._inc_ids = ids.copy()
             if len(ids) != len(self.id_n) or not np.array_equal(np.sort(ids), np.sort(self.id_n)):
                 raise InputError("atoms", "different particle ids",
                                  "the automata the MCA state was built for (same ids)")
@@ -297,9 +298,27 @@ class MCAState:
             perm = self.rows(self.id_n)[ids]      # state row of each atoms row
             self._inc = (i_p, j_p, first_n, side_p, side_s, perm)
             self._inc_key = key
+            self._consts = None
         return self._inc
 
+    def automaton_constants(self, atoms):
+        """(perm, identity, G, K, 2G, 1 - 2G/3K, K + 4G/3, Omega) per Atoms row, kept until the pair
+        table, the rows or the volumes change (``identity``: the Atoms rows are the state's rows)."""
+        inc = self.pair_rows(atoms)
+        if self._consts is None:
+            perm = inc[5]
+            ident = bool(np.array_equal(perm, np.arange(len(perm))))
+            mid = self.mat_id_n[perm]
+            G_n = self.G_m[mid]
+            K_n = self.K_m[mid]
+            self._consts = (perm, ident, G_n, K_n, 2.0 * G_n, 1.0 - 2.0 * G_n / (3.0 * K_n),
+                            K_n + 4.0 * G_n / 3.0, np.ascontiguousarray(self.omega_n[perm]))
+        return self._consts
+
+    _consts = None
+
     version_pairs = 0
+    _inc_ids = None
 
     def linked_pairs(self):
         """(P, 2) int64 stable ids (i < j) of the pairs linked now (the bond graph).
