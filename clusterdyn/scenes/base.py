@@ -8,10 +8,12 @@ with units, each next to its reference and relative error, plus the wall
 time.  The CLI prints it and writes it as JSON beside the H5MD file.
 """
 
+import dataclasses
 import importlib
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -158,6 +160,47 @@ class Param:
         return ase_val
 
 
+class SceneValues(Mapping):
+    """Base of a scene's parameter values: a frozen dataclass with one field per declared
+    :class:`Param` (ASE units), made by :func:`values_class`.
+
+    Read a value as an attribute (``v.r0``); the values are also a read-only mapping
+    (``v["r0"]``, ``v.get``, ``**v``, ``v.items()``) over the declared parameters.  A changed
+    copy is ``v.replace(dt_factor=...)``.  ``retried`` holds one line per attempt the
+    lifecycle started again after an instability (:meth:`SceneDef.retry`), oldest first.
+    """
+
+    def __getitem__(self, key):
+        if key in self._names:
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def replace(self, **changes):
+        """A copy with ``changes`` (parameter names or ``retried``)."""
+        return dataclasses.replace(self, **changes)
+
+    def __repr__(self):
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.items())})"
+
+
+def values_class(name, params):
+    """The frozen dataclass of a scene's parameter values (a :class:`SceneValues`): one field per
+    :class:`Param` of ``params``, in order, plus ``retried``."""
+    names = tuple(p.name for p in params)
+    cls_name = "".join(w.capitalize() for w in re.split(r"[^0-9a-zA-Z]+", name) if w) + "Values"
+    fields = [(n, object) for n in names] + [("retried", tuple, field(default=()))]
+    cls = dataclasses.make_dataclass(cls_name, fields, bases=(SceneValues,), frozen=True, eq=True)
+    cls._names = names
+    cls.__module__ = __name__
+    return cls
+
+
 _FAMILIES = {
     "length": ("A", "Ang", "nm", "um", "mm", "m", "cm"),
     "time": ("fs", "ps", "ns", "us", "ms", "s"),
@@ -222,6 +265,7 @@ def _clean(v):
 class SceneResult:
     """What a scene returns: quantities (with units, references, errors) and wall time.
 
+    ``data`` is what the scene's analysis kept for its report (not written).
     ``steady`` is the scene's verdict on whether what it measured had settled
     (None: the scene makes no such check); ``warnings`` are one-line messages
     the CLI prints on stderr (e.g. why a run is not steady and what would fix it).
@@ -236,6 +280,8 @@ class SceneResult:
     extra: dict = field(default_factory=dict)
     steady: bool = None
     warnings: list = field(default_factory=list)
+    #: what the scene's analysis kept for its report (in memory only, not in the JSON)
+    data: object = field(default=None, repr=False, compare=False)
 
     def as_dict(self):
         d = {"scene": self.scene}

@@ -118,8 +118,7 @@ def _stages(scene, v):
     """Every stage built and attached (refusals of the deck before any file)."""
     built = []
     for name in scene.plan(v):
-        atoms, dyn, info = scene.setup(v, name)
-        stage = scene.attach(v, name, atoms, dyn, info)
+        stage = scene.build_stage(v, name)
         check_deck(stage.atoms, stage.atoms.calc, stage.dyn, allow_region=True)
         built.append(stage)
     return built
@@ -366,8 +365,7 @@ def analyse_scene(scene_name, folder):
     scene.check(v)
     stages = []
     for name in scene.plan(v):
-        atoms, dyn, info = scene.setup(v, name)
-        stages.append(scene.attach(v, name, atoms, dyn, info))
+        stages.append(scene.build_stage(v, name))
     folders = _folders(out, stages)
     runs = [read_run(f) for f in folders]
     return _analyse(scene, v, stages, folders, runs, out, skipped)

@@ -30,7 +30,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +90,46 @@ class Stage:
     t_run: float = 0.0
     per_particle: dict = None
     stop: object = None
+    setup: object = None
+
+
+#: metadata of a :class:`Setup` field that holds a live object (not written to a checkpoint)
+LIVE = {"live": True}
+
+
+@dataclass
+class Setup:
+    """What a scene's :meth:`SceneDef.setup` builds for a stage: the sample and its dynamics (live
+    objects), and the encodable set-up facts the stage's analysis needs (index arrays, lengths,
+    speeds), one field each.
+
+    A subclass adds its fields; a field with ``metadata=LIVE`` holds a live object and is left out
+    of :meth:`state`.  :meth:`state` is the checkpoint's payload for the stage, and
+    :meth:`restore` builds the same set-up around the particles and dynamics a checkpoint gives back
+    (nothing is computed again).
+    """
+
+    atoms: object = field(repr=False, metadata=LIVE)
+    dyn: object = field(repr=False, metadata=LIVE)
+
+    def state(self):
+        """The encodable fields as a dict (tuples as lists), for a checkpoint."""
+        return {f.name: _plain(getattr(self, f.name)) for f in fields(self) if not f.metadata.get("live")}
+
+    @classmethod
+    def restore(cls, atoms, dyn, state):
+        """The set-up of ``state`` (:meth:`state`, as a checkpoint gives it back) around ``atoms`` and ``dyn``."""
+        kw = {}
+        for f in fields(cls):
+            if f.metadata.get("live") or f.name not in state:
+                continue
+            x = state[f.name]
+            if isinstance(x, np.generic):
+                x = x.item()
+            if f.type in (tuple, "tuple") and isinstance(x, (list, np.ndarray)):
+                x = tuple(y.item() if isinstance(y, np.generic) else y for y in x)
+            kw[f.name] = x
+        return cls(atoms=atoms, dyn=dyn, **kw)
 
 
 def check_out(out):
@@ -263,6 +303,9 @@ class SceneDef:
     params = ()
     #: H5MD file name stem (default: the scene's name)
     h5md_stem = None
+    #: the :class:`Setup` subclass :meth:`setup` returns (None: a scene whose ``setup`` still returns
+    #: ``(atoms, dyn, info)`` and whose ``attach`` takes them)
+    setup_class = None
     #: what a user can change from the command line after an instability (formatted with the
     #: parameters; added to the message), e.g. the MCA scenes' ``steps``
     instability_hint = None
@@ -276,23 +319,50 @@ class SceneDef:
         return ["main"]
 
     def setup(self, v, stage):
-        """Build ``(atoms, dyn, info)`` of a stage: sample, calculator, drives, dynamics."""
+        """Build a stage: sample, calculator, drives, dynamics; a :attr:`setup_class` instance (or,
+        for a scene without one, ``(atoms, dyn, info)``)."""
         raise NotImplementedError
 
-    def attach(self, v, stage, atoms, dyn, info):
-        """The :class:`Stage` around a built or restored ``(atoms, dyn, info)``."""
+    def attach(self, v, stage, setup):
+        """The :class:`Stage` around a built or restored :class:`Setup` (a scene without a
+        :attr:`setup_class`: ``attach(v, stage, atoms, dyn, info)``)."""
         raise NotImplementedError
+
+    def build_stage(self, v, stage):
+        """:meth:`setup` then :meth:`attach`: the :class:`Stage` of a fresh run."""
+        built = self.setup(v, stage)
+        if isinstance(built, Setup):
+            return self._attached(v, stage, built)
+        atoms, dyn, info = built
+        return self.attach(v, stage, atoms, dyn, info)
+
+    def restore_stage(self, v, stage, atoms, dyn, info):
+        """The :class:`Stage` around particles and dynamics restored from a checkpoint whose stage
+        payload is ``info``."""
+        if self.setup_class is None:
+            return self.attach(v, stage, atoms, dyn, info)
+        return self._attached(v, stage, self.setup_class.restore(atoms, dyn, info), info)
+
+    def _attached(self, v, name, setup, info=None):
+        st = self.attach(v, name, setup)
+        st.setup = setup
+        if not st.info:
+            st.info = setup.state() if info is None else info
+        return st
 
     def finish(self, v, stage):
         """Encodable summary of a finished stage (all that analysis and report need)."""
         raise NotImplementedError
 
     def analyse(self, v, summaries):
-        """``(quantities, notes, extra)`` from the stages' summaries."""
+        """``(quantities, notes, extra)`` from the stages' summaries, or ``(quantities, notes, extra,
+        data)``: ``data`` is what :meth:`report` needs of the analysis (fitted once here), held in
+        memory as ``result.data``."""
         raise NotImplementedError
 
     def report(self, v, summaries, result, out):
-        """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths."""
+        """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths
+        (``result.data``: what :meth:`analyse` kept for it)."""
         return []
 
     def verdict(self, v, summaries, result):
@@ -303,19 +373,32 @@ class SceneDef:
         return None
 
     # -- the lifecycle -----------------------------------------------------------------
+    @property
+    def Values(self):
+        """The frozen dataclass of this scene's parameter values (:func:`~clusterdyn.scenes.base.values_class`)."""
+        cls = self.__dict__.get("_values_class")
+        if cls is None or cls._names != tuple(p.name for p in self.params):
+            from .base import values_class
+            cls = self.__dict__["_values_class"] = values_class(self.name or type(self).__name__, self.params)
+        return cls
+
     def defaults(self):
+        """The default values (a :attr:`Values`, ASE units)."""
+        return self.Values(**self._default_dict())
+
+    def _default_dict(self):
         return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
 
     def parse(self, overrides):
         """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
         known = {p.name: p for p in self.params}
-        vals = self.defaults()
+        vals = self._default_dict()
         self._given = {k: str(x) for k, x in (overrides or {}).items()}
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
             vals[k] = known[k].parse(x)
-        return vals
+        return self.Values(**vals)
 
     def given(self, p, value):
         """A parameter's value as the user wrote it (for a refusal), else in its display unit."""
@@ -351,7 +434,7 @@ class SceneDef:
                                  + (", ".join(allowed) or "none"),
                                  hint=f"the checkpoint ran with {k}={_display(known[k], vals[k])}")
             vals[k] = new
-        return vals
+        return self.Values(**vals)
 
     def run(self, overrides=None, out=None, progress=True, restart=None):
         """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`.
@@ -447,7 +530,7 @@ class SceneDef:
         """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).
 
         A default (not given) larger than a short run is lowered to the run's steps, and
-        ``result.json`` records the number used."""
+        ``result.json`` records the number used.  Returns the values (changed where lowered)."""
         n = int(stage.nsteps)
         for key in ("frames", "h5md_frames"):
             want = v.get(key)
@@ -455,11 +538,12 @@ class SceneDef:
                 continue
             if int(want) > n:
                 if key not in getattr(self, "_given", {}):
-                    v[key] = n
+                    v = v.replace(**{key: n})
                     if key == "frames":
                         stage.frames = n
                     continue
                 raise InputError(key, self.given(key, want), f"at most the run's {n} steps (one frame per step)")
+        return v
 
     #: parameters that set the size of a cluster or automaton, and the range the model is checked in
     size_params = ("r0", "d", "r0_inclusion")
@@ -501,20 +585,19 @@ class SceneDef:
                     if resume is not None and resume.get("stage_index") == k:
                         atoms, dyn, extra = load_run(restart)
                         st = extra["stage"]
-                        stage = self.attach(v, name, atoms, dyn, st["info"])
+                        stage = self.restore_stage(v, name, atoms, dyn, st["info"])
                         if stage.analysis is not None:
                             stage.analysis.set_state(st["analysis"])
                         stage.t_run = float(st.get("t_run", 0.0))
                         resume = None
                     else:
                         try:
-                            atoms, dyn, info = self.setup(v, name)
+                            stage = self.build_stage(v, name)
                         except MemoryError as exc:
                             raise InputError("parameters", _sizes_text(self, v), "a sample that fits in memory",
                                              hint=str(exc)) from None
-                        stage = self.attach(v, name, atoms, dyn, info)
                     if attempt == 0:
-                        self._check_frames(v, stage)
+                        v = self._check_frames(v, stage)
                         self._check_wall(v, stage)
                     files += self._run_stage(v, k, stage, summaries, out, progress, len(names), watch)
                     break
@@ -529,11 +612,12 @@ class SceneDef:
                         raise
                     v = nv
             summaries.append(self.finish(v, stage))
-        quantities, notes, extra = self.analyse(v, summaries)
+        analysed = self.analyse(v, summaries)
+        quantities, notes, extra = analysed[:3]
         if out is not None and LAST_CHECKPOINT.get("path") == str(out / CHECKPOINT):
             files.append(out / CHECKPOINT)            # written by this run: listed with what it wrote
         res = SceneResult(self.name, quantities, 0.0, params=self.display(v), notes=list(notes),
-                          extra=extra, files=[f for f in files if f])
+                          extra=extra, files=[f for f in files if f], data=analysed[3] if len(analysed) > 3 else None)
         self.verdict(v, summaries, res)
         if out is not None:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]
@@ -765,4 +849,4 @@ def scene_params(params, *, frames=None, h5md_frames=20, checkpoint_every=10):
     return list(params) + [p for p in common if p.name not in own]
 
 
-__all__ = ["Stage", "SceneDef", "check_out", "scene_params", "CHECKPOINT"]
+__all__ = ["Stage", "Setup", "SceneDef", "check_out", "scene_params", "CHECKPOINT", "LIVE"]

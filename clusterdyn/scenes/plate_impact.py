@@ -33,6 +33,7 @@ from ..analysis.profiles import ProfileRecorder, write_profiles_csv
 from ..analysis.stress import particle_virials
 from ..build import Plate, fcc_packing, polycrystal
 from ..build.lattice import SQRT2, lattice_sound_speed
+from ..build.two_phase import rest_volumes
 from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
@@ -42,7 +43,7 @@ from .base import Param, Quantity, register_scene
 from .common import make_piston, matplotlib_agg, piston_thickness, thermal_noise
 from .lifecycle import SceneDef, Stage, scene_params
 from ..analysis.shock import ShockTracker
-from .shock import ShockSetup, shock_info, shock_quantities, shock_stage, shock_summary
+from .shock import ShockSetup, shock_quantities, shock_stage, shock_summary
 
 #: gap between the plates' surfaces at the start, in r0 (just beyond the cutoff)
 GAP = 1.25
@@ -549,33 +550,33 @@ class PlateImpactScene(SceneDef):
     params = scene_params(PARAMS)
 
     def check(self, v):
-        if v["sample"] != "single" and v["grain_size"] > 2 * min(v["flyer"], v["target"]):
-            raise InputError("grain_size", v["grain_size"], f"at most twice the thinner plate "
-                             f"({min(v['flyer'], v['target']):g} r0)")
-        _profile_times(v["profile_times"], {"c0": 1.0, "target": 1.0})
-        if v["packing"] is not None:
+        if v.sample != "single" and v.grain_size > 2 * min(v.flyer, v.target):
+            raise InputError("grain_size", v.grain_size, f"at most twice the thinner plate "
+                             f"({min(v.flyer, v.target):g} r0)")
+        _profile_times(v.profile_times, {"c0": 1.0, "target": 1.0})
+        if v.packing is not None:
             from .packing import resolve_packing
-            resolve_packing(v["packing"])            # checked before any work
+            resolve_packing(v.packing)            # checked before any work
 
     def plan(self, v):
-        return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
+        return ["single", "polycrystal"] if v.sample == "both" else [v.sample]
 
     def setup(self, v, stage):
-        s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
-                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
-                         boundaries=v["boundaries"], packing=v["packing"])
+        s = build_impact(stage, "Al", v.v, v.r0, v.flyer, v.target, v.width, v.grain_size,
+                         v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
+                         boundaries=v.boundaries, packing=v.packing)
         info = impact_info(s)
-        info["nsteps"] = int(math.ceil(impact_duration(info, v["duration"]) / s["dt"]))
+        info["nsteps"] = int(math.ceil(impact_duration(info, v.duration) / s["dt"]))
         return s["atoms"], s["dyn"], info
 
     def attach(self, v, stage, atoms, dyn, info):
-        end = impact_duration(info, v["duration"])
-        late = [t for t in _profile_times(v["profile_times"], info) if t > end * (1 + 1e-9)]
+        end = impact_duration(info, v.duration)
+        late = [t for t in _profile_times(v.profile_times, info) if t > end * (1 + 1e-9)]
         if late:
-            raise InputError("profile_times", v["profile_times"], f"times within the run, 0-{end / units.ns:.4g} ns "
+            raise InputError("profile_times", v.profile_times, f"times within the run, 0-{end / units.ns:.4g} ns "
                              "(set duration to run longer)")
         rec = ImpactRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
+        return Stage(stage, atoms, dyn, int(info["nsteps"]), v.frames, info, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
@@ -610,7 +611,7 @@ class PlateImpactScene(SceneDef):
 
     def report(self, v, summaries, result, out):
         results = self._results(summaries)
-        times_by = {name: _profile_times(v["profile_times"], info) for name, (info, _, _) in results.items()}
+        times_by = {name: _profile_times(v.profile_times, info) for name, (info, _, _) in results.items()}
         plot_impact(results, out / "plate_impact_profiles.png", times_by)
         plot_visar(results, out / "plate_impact_visar.png")
         files = [out / "plate_impact_profiles.png", out / "plate_impact_visar.png"]
@@ -646,8 +647,8 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
 
     Returns
     -------
-    (ShockSetup, dict)
-        The set-up and a dict with the sample report and the relaxation.
+    ShockSetup
+        The set-up; its ``sample`` holds the sample report and the relaxation.
     """
     mat = get_material(material)
     a = SQRT2 * r0
@@ -693,9 +694,9 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
     except InputError:
         d_guess = pot.c0 + 1.3 * u
     nsteps = int(math.ceil(0.8 * L / d_guess / dt))
-    setup = ShockSetup(atoms, calc, dyn, piston, mask, nsteps, max(a, r0), L, mat.replace(rho0=rho0), u,
-                       rho0=rho0)
-    return setup, {"report": report or {}, "relax": relax or {}}
+    return ShockSetup(atoms, dyn, piston_index=np.nonzero(mask)[0], nsteps=nsteps, slab=max(a, r0), length=L, u=u,
+                      rho0=rho0, x0=float(atoms.positions[~mask, 0].min()), rest_volume=rest_volumes(atoms),
+                      sample={"report": report or {}, "relax": relax or {}}, material=mat.replace(rho0=rho0))
 
 
 SHOCK_PARAMS = [
@@ -720,35 +721,33 @@ class PolycrystalShockScene(SceneDef):
     description = ("piston shock in a relaxed Al polycrystal of given porosity: D-u point beside the single "
                    "crystal and the experimental Hugoniot")
     params = scene_params(SHOCK_PARAMS)
+    setup_class = ShockSetup
 
     def plan(self, v):
-        return ["pc", "sc"] if v["single"] else ["pc"]
+        return ["pc", "sc"] if v.single else ["pc"]
 
     def setup(self, v, stage):
-        s, extra = polycrystal_shock_setup(v["u"], "polycrystal" if stage == "pc" else "single", r0=v["r0"],
-                                           length=v["length"], width=v["width"], grain_size=v["grain_size"],
-                                           porosity=v["porosity"], seed=v["seed"], packing=v["packing"])
-        info = shock_info(s)
-        info.update(extra)
-        return s.atoms, s.dyn, info
+        return polycrystal_shock_setup(v.u, "polycrystal" if stage == "pc" else "single", r0=v.r0,
+                                       length=v.length, width=v.width, grain_size=v.grain_size,
+                                       porosity=v.porosity, seed=v.seed, packing=v.packing)
 
-    def attach(self, v, stage, atoms, dyn, info):
-        mat = get_material("Al").replace(rho0=float(info["rho0"]))
-        return shock_stage(stage, atoms, dyn, info, mat, v["frames"])
+    def attach(self, v, stage, setup):
+        return shock_stage(stage, setup, v.frames)
 
     def finish(self, v, stage):
         sm = shock_summary(stage)
-        sm.update({"name": stage.name, "report": stage.info["report"], "relax": stage.info["relax"]})
+        sm.update({"name": stage.name, "report": stage.setup.sample["report"], "relax": stage.setup.sample["relax"]})
         return sm
 
     def analyse(self, v, summaries):
-        u = v["u"]
+        u = v.u
         mat = get_material("Al")
         ref = hugoniot("Al-1100")
-        q, notes = {}, []
+        q, notes, states = {}, [], []
         for sm in summaries:
             key = sm["name"]
             state = ShockTracker.from_state(sm["tracker"]).result()
+            states.append(state)
             qq, _ = shock_quantities(state, mat, u)
             for name in ("D", "u", "P", "rho"):
                 q[f"{key}_{name}"] = qq[name]
@@ -756,10 +755,10 @@ class PolycrystalShockScene(SceneDef):
                          f"{sm['nsteps']} steps, {' '.join(state.notes) or 'steady'}")
             if key == "pc" and sm["report"]:
                 notes.append("polycrystal: " + _summary(sm["report"]))
-                q["pc_porosity"] = Quantity(sm["report"]["porosity"], "", v["porosity"])
+                q["pc_porosity"] = Quantity(sm["report"]["porosity"], "", v.porosity)
         notes.append(f"reference: Al-1100 D = {ref.D(u) / units.km_s:.3f} km/s at u = {u / units.km_s:g} km/s "
                      "(dense metal; a porous sample's own Hugoniot lies lower)")
-        return q, notes, {}
+        return q, notes, {}, states
 
     def report(self, v, summaries, result, out):
         import csv
@@ -769,8 +768,7 @@ class PolycrystalShockScene(SceneDef):
         uu = np.linspace(0, 3, 50)
         ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", label="Al-1100 (experiment)")
         rows = []
-        for sm in summaries:
-            state = ShockTracker.from_state(sm["tracker"]).result()
+        for sm, state in zip(summaries, result.data):
             lab = {"pc": "CD polycrystal", "sc": "CD single crystal [100]"}[sm["name"]]
             if sm["name"] == "pc" and sm["report"]:
                 lab += f" (porosity {100 * sm['report']['porosity']:.1f}%)"

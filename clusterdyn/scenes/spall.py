@@ -123,21 +123,21 @@ class SpallScene(SceneDef):
     params = scene_params(PARAMS)
 
     def check(self, v):
-        if v["target"] <= v["flyer"]:
-            raise InputError("target", v["target"], f"thicker than the flyer ({v['flyer']:g} r0)")
-        if v["sample"] != "single" and v["grain_size"] > 2 * v["flyer"]:
-            raise InputError("grain_size", v["grain_size"], f"at most twice the flyer ({v['flyer']:g} r0)")
-        if v["packing"] is not None:
+        if v.target <= v.flyer:
+            raise InputError("target", v.target, f"thicker than the flyer ({v.flyer:g} r0)")
+        if v.sample != "single" and v.grain_size > 2 * v.flyer:
+            raise InputError("grain_size", v.grain_size, f"at most twice the flyer ({v.flyer:g} r0)")
+        if v.packing is not None:
             from .packing import resolve_packing
-            resolve_packing(v["packing"])            # checked before any work
+            resolve_packing(v.packing)            # checked before any work
 
     def plan(self, v):
-        return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
+        return ["single", "polycrystal"] if v.sample == "both" else [v.sample]
 
     def setup(self, v, stage):
-        s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
-                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
-                         packing=v["packing"])
+        s = build_impact(stage, "Al", v.v, v.r0, v.flyer, v.target, v.width, v.grain_size,
+                         v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
+                         packing=v.packing)
         atoms = s["atoms"]
         info = impact_info(s)
         plate = atoms.arrays["plate"]
@@ -145,13 +145,13 @@ class SpallScene(SceneDef):
         info.update({"x0": x0, "target_rows": np.nonzero(plate == 1)[0],
                      "x_flyer_rear": float(x0[plate == 0].min()), "x_target_front": float(x0[plate == 1].min()),
                      "rho0": _density(atoms, plate == 1, s["width"], s["r0"]),
-                     "nsteps": int(math.ceil(spall_duration(info, v["duration"]) / s["dt"]))})
+                     "nsteps": int(math.ceil(spall_duration(info, v.duration) / s["dt"]))})
         s["dyn"].start_ledger()
         return atoms, s["dyn"], info
 
     def attach(self, v, stage, atoms, dyn, info):
         rec = SpallRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
+        return Stage(stage, atoms, dyn, int(info["nsteps"]), v.frames, info, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
@@ -208,7 +208,7 @@ def analyse_spall(sm, v):
     pb = pullback(sm["fsv_t"], sm["fsv_v"], info["v"], pulse=pulse, c=c0)
     rho0 = info["rho0"]
     ws = wave_speeds(sm["lmap"], info["x_target_front"] - 0.5 * r0 / SQRT2, info["x_rear"] + 0.5 * r0 / SQRT2,
-                     level=v["level"])
+                     level=v.level)
     plane = sm["plane"]
     depth = plane["scab_fraction"] * Lt if plane["spalled"] else float("nan")
     ring, T = (ring_thickness(sm["fsv_t"], sm["fsv_v"], pb["t_signal"], cL) if pb["spall_signal"]
@@ -262,7 +262,7 @@ def spall_quantities(sm, v):
                                         "vs the scab"),
         p + "D": Quantity(ws["D"] / units.km_s, "km/s", note="shock speed (half amplitude), material coordinates"),
         p + "c_release_forward": Quantity(ws["c_forward"] / units.km_s, "km/s",
-                                          note=f"release from the flyer's rear, at {v['level']:g} of the pulse"),
+                                          note=f"release from the flyer's rear, at {v.level:g} of the pulse"),
         p + "c_release_backward": Quantity(ws["c_backward"] / units.km_s, "km/s",
                                            note="release reflected from the target's rear face"),
         p + "target_fragments": Quantity(plane["n_target_fragments"], "", note="fragments of the target at the end"),
@@ -274,7 +274,7 @@ def spall_quantities(sm, v):
              f"{info['flyer'] / r0:g} r0 from the rear face); largest target fragments "
              f"{plane['largest_target_fragments']}",
              f"{sm['name']}: waves in material coordinates: D {ws['D'] / units.km_s:.3f} km/s, releases at "
-             f"{v['level']:g} of the pulse {ws['c_forward'] / units.km_s:.3f} / {ws['c_backward'] / units.km_s:.3f} km/s "
+             f"{v.level:g} of the pulse {ws['c_forward'] / units.km_s:.3f} / {ws['c_backward'] / units.km_s:.3f} km/s "
              f"({ws['n_forward']} / {ws['n_backward']} frames), crossing at {ws['d_expected'] / r0:.2f} r0 from the "
              f"rear face, t = {ws['t_cross'] / units.ns:.1f} ns",
              f"{sm['name']}: perfect [100] lattice in uniaxial strain holds {IDEAL_SPALL_100_GPA} GPa; measured "
