@@ -12,10 +12,13 @@ import dataclasses
 import importlib
 import json
 import math
+import numbers
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from .. import units
 from ..errors import InputError
@@ -83,8 +86,29 @@ class Param:
         rb = ")" if hi == "inf" else "]"
         return f"{base} in {lb}{lo}, {hi}{rb}{u}" + (" or none" if self.optional else "")
 
+    def takes_ase_number(self, value):
+        """True when ``value`` is a bare Python number for a parameter with a unit: from Python it is
+        read in ASE units (:meth:`parse_ase`), as builders and calculators take it."""
+        return (self.unit is not None and self.kind == "float" and type(self).parse is Param.parse
+                and isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)))
+
+    def parse_ase(self, value):
+        """A bare number in ASE units (``5 * units.um``), checked against the range in the display unit;
+        returned as given (a float)."""
+        num = float(value)
+        disp = num / units.NAMED[self.unit]
+        shown = f"{num:g} (ASE units: {disp:g} {self.unit})"
+        if not math.isfinite(num):
+            raise InputError(self.name, shown, self._allowed())
+        self._check_range(disp, shown)
+        return num
+
     def parse(self, value):
-        """Parse text (CLI) or a Python value; return the value in ASE units."""
+        """Parse text (CLI) or a value; return the value in ASE units.
+
+        A bare number is read in the parameter's display unit (as the defaults and the CLI
+        write it); a scene's :meth:`~clusterdyn.scenes.lifecycle.SceneDef.parse` reads bare
+        Python numbers in ASE units instead (:meth:`parse_ase`)."""
         text = value
         if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off")):
             if self.optional:
@@ -187,6 +211,19 @@ class SceneValues(Mapping):
 
     def __repr__(self):
         return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.items())})"
+
+
+def display_text(scene, overrides):
+    """``overrides`` with every bare number of a parameter that has a unit written as text in that unit
+    (``{"r0": 5.0}`` -> ``{"r0": "5.0um"}``): for callers whose numbers are in the display units the
+    CLI and ``clusterdyn list`` use, since :meth:`SceneDef.parse` reads bare Python numbers in ASE
+    units.  Exact: the text is the number's ``repr``."""
+    known = {p.name: p for p in scene.params}
+    out = {}
+    for k, x in (overrides or {}).items():
+        p = known.get(k)
+        out[k] = f"{float(x)!r}{p.unit}" if p is not None and p.takes_ase_number(x) else x
+    return out
 
 
 def values_class(name, params):

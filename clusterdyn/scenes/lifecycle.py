@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import units
 from ..errors import DEFER_INTERRUPT, InputError, InstabilityError, OutputError, check_interrupt
 
 #: checkpoint file name in the output folder
@@ -269,6 +270,24 @@ def _write_failure(exc):
     return isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, (CalculationFailed, InputError))
 
 
+def _given_text(params, overrides):
+    """The overrides as the user wrote them, for refusals (a bare ASE number shown in the display unit too)."""
+    known = {p.name: p for p in params}
+    out = {}
+    for k, x in (overrides or {}).items():
+        p = known.get(k)
+        if p is not None and p.takes_ase_number(x):
+            out[k] = f"{float(x):g} (ASE units: {float(x) / units.NAMED[p.unit]:g} {p.unit})"
+        else:
+            out[k] = str(x)
+    return out
+
+
+def _parse_value(p, x):
+    """One override: bare Python numbers of a parameter with a unit in ASE units, the rest as text."""
+    return p.parse_ase(x) if p.takes_ase_number(x) else p.parse(x)
+
+
 def _same(a, b):
     """Parameter values equal (tuples and lists alike; floats exactly)."""
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
@@ -390,14 +409,23 @@ class SceneDef:
         return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
 
     def parse(self, overrides):
-        """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
+        """The parameter values (a :attr:`Values`, ASE units): the defaults updated with ``overrides``.
+
+        ``overrides`` maps parameter names to text or Python values.  Text is read as on the
+        command line: a number with a unit (``"5um"``, ``"3km/s"``), or a bare number in the
+        parameter's display unit (``clusterdyn list`` names it).  A bare Python number for a
+        parameter with a unit is in ASE units, as builders and calculators take it:
+        ``{"r0": 5 * units.um}`` is 5 um (its range is checked in the display unit).  Unknown keys
+        and values out of range are refused in one line (InputError).  Callers whose numbers are in
+        display units write them as text first (:func:`~clusterdyn.scenes.base.display_text`).
+        """
         known = {p.name: p for p in self.params}
         vals = self._default_dict()
-        self._given = {k: str(x) for k, x in (overrides or {}).items()}
+        self._given = _given_text(self.params, overrides)
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
-            vals[k] = known[k].parse(x)
+            vals[k] = _parse_value(known[k], x)
         return self.Values(**vals)
 
     def given(self, p, value):
@@ -423,11 +451,11 @@ class SceneDef:
             else:
                 vals[p.name] = p.parse(p.default) if p.default is not None else None
         allowed = self.restart_keys()
-        self._given = {k: str(x) for k, x in (overrides or {}).items()}
+        self._given = _given_text(self.params, overrides)
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
-            new = known[k].parse(x)
+            new = _parse_value(known[k], x)
             if k not in allowed and not _same(new, vals[k]):
                 raise InputError("--set", f"{k}={x}",
                                  "on --restart only keys a continuation can change: "

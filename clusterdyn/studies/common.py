@@ -233,7 +233,8 @@ def run_key(scene, params):
 
 def run_folder(cache, scene, overrides):
     """``cache/<scene>-<12 hex digits>``: one folder per parameter set (hash of :func:`run_key`)."""
-    key = run_key(scene, scene.display(scene.parse(overrides)))
+    from ..scenes.base import display_text
+    key = run_key(scene, scene.display(scene.parse(display_text(scene, overrides))))
     h = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
     return Path(cache) / f"{scene.name}-{h}"
 
@@ -250,6 +251,8 @@ def run_scene(scene, overrides, progress=False, desc=None, folder=None, reuse=Tr
     studies sharing a cache share their runs.
     """
     from ..errors import InstabilityError
+    from ..scenes.base import display_text
+    overrides = display_text(scene, overrides)      # a study's numbers are in display units
     params = _jsonable(scene.display(scene.parse(overrides)))
     if folder is None and cache is not None:
         folder = run_folder(cache, scene, overrides)
@@ -352,7 +355,8 @@ class StudyPoint:
         return self._def.defaults()
 
     def parse(self, overrides):
-        return self._def.parse(overrides)
+        from ..scenes.base import display_text
+        return self._def.parse(display_text(self._def, overrides))
 
     def display(self, vals):
         return self._def.display(vals)

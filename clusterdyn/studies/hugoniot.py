@@ -45,7 +45,7 @@ from ..calculators import ClusterDynamics, mark_initial_bonds
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..scenes import get_scene
-from ..scenes.base import Param
+from ..scenes.base import Param, display_text
 from ..scenes.shock import CD_MATERIALS, U_MAX, ShockScene, cold_shock_state
 from .common import (ListParam, format_table, markdown_table, out_folder, parse_params, progress_bar,
                      run_scene, shock_row, write_csv, write_json)
@@ -218,6 +218,7 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
                 plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
 
     def run_row(ov):
+        ov = display_text(scene, ov)            # the sweep's numbers are in display units
         res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
         pv = scene.display(scene.parse(ov))
         # the sample that ran (size=auto resolved)
