@@ -43,7 +43,7 @@ from ..build.lattice import SQRT2
 from ..errors import InputError
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg, plain_ledger
+from .common import ledger_joules, matplotlib_agg
 from .lifecycle import SceneDef, Stage, scene_params
 from .shock import build_shock
 
@@ -248,12 +248,12 @@ class DustingScene(SceneDef):
                  "drive: piston (first 1.5 r0) at u for the whole run",
                  f"dispersed: fragments of <= {v.g_max} clusters whose centre lies > b r0 beyond the main "
                  f"body's (largest fragment's) rear surface (b = {info['b']:g}); damping {'off' if v.J is None else 'J = %g' % v.J}",
-                 "energy ledger (eV): kinetic {kinetic:.6g}, potential {potential:.6g}, piston work {drive_work:.6g}, "
+                 "energy ledger (J): kinetic {kinetic:.6g}, potential {potential:.6g}, piston work {drive_work:.6g}, "
                  "layer kinetic {layer_kinetic:.6g}, damping loss {damping_loss:.6g}, energy in {energy_in:.6g}, "
-                 "residual {residual:.3g}".format(**L)]
+                 "residual {residual:.3g}".format(**ledger_joules(L))]
         for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
-        extra = {"ledger_eV": plain_ledger(L), "n_particles": sm["n"], "n_steps": sm["nsteps"],
+        extra = {"ledger_J": ledger_joules(L), "n_particles": sm["n"], "n_steps": sm["nsteps"],
                  "stepping_time_s": sm["t_run"],
                  "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()},
                  "t_end_us": sm["t_end"] / units.us, "area_um2": info["area"] / units.um ** 2,

@@ -53,17 +53,17 @@ def _params():
         Param("material_top", "alumina", "upper block material", kind="choice", choices=MATERIALS),
         Param("d", 10.0, "automaton size (2R)", unit="um", low=0.0, low_open=True),
         Param("size", (24, 4), "each block: periodic length x height in automaton sizes", kind="ints", low=2),
-        Param("stress", 0.05, "normal stress pressing the blocks together (> 0; below the softer block's "
+        Param("stress", 0.05, "normal stress pressing the blocks together (below the softer block's "
               "compressive or yield strength)", unit="GPa", low=0.0, low_open=True),
-        Param("V", 20.0, "sliding speed of the upper block's top row (> 0; at most 1% of the slower block's "
+        Param("V", 20.0, "sliding speed of the upper block's top row (at most 1% of the slower block's "
               "bar wave speed, sqrt(E/rho): a quasi-static slide)", unit="m/s", low=0.0, low_open=True),
-        Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s (>= 0)"),
-        Param("mu1", 0.3, "dry friction coefficient (>= 0)"),
-        Param("K_av", 0.0, "mean interlocking (>= 0)"),
-        Param("A1", 0.0, "mean amplitude of sinusoid 1 (>= 0)", unit="um"),
+        Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s", low=0.0),
+        Param("mu1", 0.3, "dry friction coefficient", low=0.0),
+        Param("K_av", 0.0, "mean interlocking", low=0.0),
+        Param("A1", 0.0, "mean amplitude of sinusoid 1", unit="um", low=0.0),
         Param("l1", 5.0, "mean half-period of sinusoid 1", unit="um"),
         Param("d1", 20.0, "regularity length (mean section) of sinusoid 1", unit="um"),
-        Param("A2", 0.0, "mean amplitude of sinusoid 2 (>= 0)", unit="um"),
+        Param("A2", 0.0, "mean amplitude of sinusoid 2", unit="um", low=0.0),
         Param("l2", 1.0, "mean half-period of sinusoid 2", unit="um"),
         Param("d2", 5.0, "regularity length of sinusoid 2", unit="um"),
         Param("v_reg", 0.001, "regularising velocity of the dry part", unit="m/s", low=0.0, low_open=True),
@@ -281,7 +281,7 @@ class FrictionScene(SceneDef):
     def report(self, v, summaries, result, out):
         sm = summaries[0]
         c = {k: np.asarray(x, float) for k, x in sm["curve"].items() if isinstance(x, list)}
-        path = out / "mca-friction-mu.csv"
+        path = out / "mca_friction_mu.csv"
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["time_ns", "sliding_um", "mu_dr", "FN_N_per_A", "contacts", "mean_K_mu", "K_mu_clips",
@@ -290,7 +290,7 @@ class FrictionScene(SceneDef):
                            c["contacts"], c["mean_K"], c["clips"], c["friction_work"] * JM,
                            c["damping_work"] * JM, c["drive_work"] * JM):
                 w.writerow(row)
-        png = friction_plot(c, v, out / "mca-friction-mu.png", sm["t_slide"])
+        png = friction_plot(c, v, out / "mca_friction_mu.png", sm["t_slide"])
         return [path, png]
 
 

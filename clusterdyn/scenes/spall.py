@@ -42,7 +42,7 @@ from ..build.lattice import SQRT2, lattice_sound_speed
 from ..errors import InputError
 from ..materials import get_material
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg, plain_ledger
+from .common import ledger_joules, matplotlib_agg
 from .lifecycle import SceneDef, Stage, scene_params
 from .plate_impact import ImpactRecord, build_impact, impact_info, write_visar_csv
 
@@ -230,6 +230,7 @@ def spall_quantities(sm, v):
     p = "sc_" if sm["name"] == "single" else "pc_"
     r0 = info["r0"]
     L = sm["ledger"]
+    LJ = ledger_joules(L)
     lo, hi = MEASURED_AL_SPALL_GPA
     ideal = IDEAL_SPALL_100_GPA if sm["name"] == "single" else None
     measured = 0.5 * (lo + hi) if sm["name"] != "single" else None
@@ -240,24 +241,17 @@ def spall_quantities(sm, v):
                                 note="first free-surface maximum vs the impact speed"),
         p + "fsv_min": Quantity(pb["u_min"] / units.m_s, "m/s", note="minimum before the velocity rises again"),
         p + "pullback": Quantity(pb["du"] / units.m_s, "m/s", note="u_max - u_min"),
-        p + "spall_strength_cb": Quantity(a["sigma_cb"] / units.GPa, "GPa", measured,
-                                          note=f"rho0 c_b du / 2, c_b = c0 = {a['c_b'] / units.km_s:.3f} km/s, "
-                                               f"rho0 = {a['rho0'] / units.g_cm3:.4f} g/cm3"
-                                               + (f"; vs measured Al {lo:g}-{hi:g} GPa" if measured else "")),
-        p + "spall_strength_cL": Quantity(a["sigma_cL"] / units.GPa, "GPa", ideal,
-                                          note=f"rho0 c_L du / 2, c_L = sqrt(3/2) c0 = {a['c_L'] / units.km_s:.3f} "
-                                               "km/s ([100] lattice)"
-                                               + ("; vs the perfect [100] lattice in uniaxial strain" if ideal else "")),
+        **_strengths(p, a, bool(plane["spalled"]), measured, ideal, lo, hi),
         p + "max_tension": Quantity(a["max_tension"] / units.GPa, "GPa", ideal,
                                     note="largest sigma_xx (tension) of any 2 r0 slab over the run"),
         p + "max_compression": Quantity(a["max_compression"] / units.GPa, "GPa",
                                         note="largest -sigma_xx of any 2 r0 slab over the run"),
         p + "strain_rate": Quantity(pb["strain_rate"] * units.s, "1/s",
                                     note="unloading: -(du_fs/dt)/(2 c_b) between 20% and 80% of the drop"),
-        p + "spall_depth": Quantity(a["depth"] / r0, "r0", ws["d_expected"] / r0,
+        p + "spall_depth": Quantity(a["depth"] / r0, "r0", _finite(ws["d_expected"] / r0),
                                     note="scab thickness (its share of the target's clusters x target) vs where "
                                          "the releases cross (measured speeds)"),
-        p + "ring_depth": Quantity(a["ring"] / r0, "r0", a["depth"] / r0 if math.isfinite(a["depth"]) else None,
+        p + "ring_depth": Quantity(a["ring"] / r0, "r0", _finite(a["depth"] / r0),
                                    note=f"c_L T / 2 from the VISAR ringing, T = {a['ring_T'] / units.ns:.4g} ns, "
                                         "vs the scab"),
         p + "D": Quantity(ws["D"] / units.km_s, "km/s", note="shock speed (half amplitude), material coordinates"),
@@ -269,22 +263,55 @@ def spall_quantities(sm, v):
         p + "ledger_residual": Quantity(L["residual"] / L["energy_in"], "",
                                         note="energy ledger residual / initial kinetic energy"),
     }
-    notes = [f"{sm['name']}: {sm['n']} clusters, {sm['nsteps']} steps, {sm['t_run']:.1f} s stepping; flyer "
+    notes = []
+    for key, why in ((p + "spall_depth", "no scab (the target did not spall)"),
+                     (p + "ring_depth", "no ringing after a spall signal in the free-surface velocity")):
+        if not math.isfinite(q[key].value):
+            del q[key]
+            notes.append(f"{key}: not measured: {why}")
+    notes += [f"{sm['name']}: {sm['n']} clusters, {sm['nsteps']} steps, {sm['t_run']:.1f} s stepping; flyer "
              f"{info['flyer'] / r0:g} r0, target {info['target'] / r0:g} r0 (acoustic spall plane: "
              f"{info['flyer'] / r0:g} r0 from the rear face); largest target fragments "
              f"{plane['largest_target_fragments']}",
              f"{sm['name']}: waves in material coordinates: D {ws['D'] / units.km_s:.3f} km/s, releases at "
              f"{v.level:g} of the pulse {ws['c_forward'] / units.km_s:.3f} / {ws['c_backward'] / units.km_s:.3f} km/s "
-             f"({ws['n_forward']} / {ws['n_backward']} frames), crossing at {ws['d_expected'] / r0:.2f} r0 from the "
-             f"rear face, t = {ws['t_cross'] / units.ns:.1f} ns",
+             f"({ws['n_forward']} / {ws['n_backward']} frames), " + _crossing(ws, r0),
              f"{sm['name']}: perfect [100] lattice in uniaxial strain holds {IDEAL_SPALL_100_GPA} GPa; measured "
              f"aluminium {lo:g}-{hi:g} GPa at 1e5-1e6 /s",
-             f"{sm['name']}: energy ledger (eV): kinetic {L['kinetic']:.6g}, potential {L['potential']:.6g}, damping "
-             f"loss {L['damping_loss']:.6g}, energy in {L['energy_in']:.6g}, residual {L['residual']:.3g}"]
-    ex = {"ledger_eV": plain_ledger(L), "pullback": {k: _num(x) for k, x in pb.items()},
+             f"{sm['name']}: energy ledger (J): kinetic {LJ['kinetic']:.6g}, potential {LJ['potential']:.6g}, damping "
+             f"loss {LJ['damping_loss']:.6g}, energy in {LJ['energy_in']:.6g}, residual {LJ['residual']:.3g}"]
+    ex = {"ledger_J": LJ, "pullback": {k: _num(x) for k, x in pb.items()},
           "waves": {k: _num(x) for k, x in ws.items()}, "plane": plane,
           "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()}}
     return q, notes, ex
+
+
+def _finite(x):
+    return x if math.isfinite(x) else None
+
+
+def _crossing(ws, r0):
+    """Where the two releases cross (or why there is no such point)."""
+    if math.isfinite(ws["d_expected"]) and math.isfinite(ws["t_cross"]):
+        return f"crossing at {ws['d_expected'] / r0:.2f} r0 from the rear face, t = {ws['t_cross'] / units.ns:.1f} ns"
+    return "no crossing point: a release speed was not measured (too few frames above the level)"
+
+
+def _strengths(p, a, spalled, measured, ideal, lo, hi):
+    """The pullback strengths: spall strengths when the target spalled, else the tension it held (a lower
+    bound of its spall strength), under keys that say so."""
+    name, what = ("spall_strength", "") if spalled else ("tension_held", "no spall: the tension the target held, "
+                                                         "a lower bound of its spall strength; ")
+    return {
+        p + name + "_cb": Quantity(a["sigma_cb"] / units.GPa, "GPa", measured,
+                                   note=f"{what}rho0 c_b du / 2, c_b = c0 = {a['c_b'] / units.km_s:.3f} km/s, "
+                                        f"rho0 = {a['rho0'] / units.g_cm3:.4f} g/cm3"
+                                        + (f"; vs measured Al {lo:g}-{hi:g} GPa" if measured else "")),
+        p + name + "_cL": Quantity(a["sigma_cL"] / units.GPa, "GPa", ideal,
+                                   note=f"{what}rho0 c_L du / 2, c_L = sqrt(3/2) c0 = {a['c_L'] / units.km_s:.3f} "
+                                        "km/s ([100] lattice)"
+                                        + ("; vs the perfect [100] lattice in uniaxial strain" if ideal else "")),
+    }
 
 
 def _num(x):

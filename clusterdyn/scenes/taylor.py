@@ -407,6 +407,20 @@ def analyse_rod(sm):
     return m
 
 
+def _unmeasured(q, m):
+    """Drop the rod measures that could not be taken (no undeformed rear: X = 0, so no Taylor estimate);
+    return one note each saying why."""
+    notes = []
+    if not m["X"] > 0:
+        del q["X_over_L0"], q["Y_taylor"]
+        notes.append("X_over_L0, Y_taylor: not measured: no part of the rod's rear keeps its radius within 2% of "
+                     "D0/2 (X = 0), and Taylor's estimate needs ln(L0/X)")
+    elif not math.isfinite(m["Y"]):
+        del q["Y_taylor"]
+        notes.append("Y_taylor: not measured: Taylor's estimate is undefined for this rod (Lf = L0 or X = L0)")
+    return notes
+
+
 class TaylorScene(SceneDef):
     """The ``taylor`` scene on the lifecycle (module docstring)."""
 
@@ -501,7 +515,7 @@ class TaylorScene(SceneDef):
                                   "at the end (negative: rebound)")
         lq, lnote = ledger_quantities(sm["ledger"])
         q.update(lq)
-        notes = []
+        notes = _unmeasured(q, m)
         notes += list(info["notes"])
         mca = info.get("method") == "mca"
         if mca:

@@ -29,7 +29,7 @@ class ListParam(Param):
 
     def describe(self):
         d = "none" if self.default is None else ",".join(f"{x:g}" for x in self.default)
-        return f"{self.name} = {d}{' ' + self.unit if self.unit else ''}  -- {self.doc}"
+        return f"{self.name} = {d}{' ' + self.unit if self.unit and self.default is not None else ''}  -- {self.doc}"
 
     def parse(self, value):
         if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off", "")):
