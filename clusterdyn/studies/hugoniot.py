@@ -114,7 +114,7 @@ def _fwd_with(fwd, **kw):
     d.update({k: v for k, v in kw.items() if v is not None})
     d.setdefault("h5md", "false")
     d.setdefault("checkpoint_every", "0")
-    return d
+    return display_text(get_scene("shock"), d)      # the sweep's numbers are in display units
 
 
 # --------------------------------------------------------------------------- static checks
@@ -218,7 +218,6 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
                 plan.append((f"pure {m}", _fwd_with(pure, material=m, u=u)))
 
     def run_row(ov):
-        ov = display_text(scene, ov)            # the sweep's numbers are in display units
         res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
         pv = scene.display(scene.parse(ov))
         # the sample that ran (size=auto resolved)
