@@ -241,6 +241,11 @@ class SceneDef:
         memory as ``result.data``."""
         raise NotImplementedError
 
+    def analysed(self, v, summaries):
+        """:meth:`analyse` as ``(quantities, notes, extra, data)`` (``data`` None when it keeps nothing)."""
+        out = tuple(self.analyse(v, summaries))
+        return out if len(out) == 4 else out + (None,)
+
     def report(self, v, summaries, result, out):
         """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths
         (``result.data``: what :meth:`analyse` kept for it)."""
@@ -502,12 +507,11 @@ class SceneDef:
                         raise
                     v = nv
             summaries.append(self.finish(v, stage))
-        analysed = self.analyse(v, summaries)
-        quantities, notes, extra = analysed[:3]
+        quantities, notes, extra, data = self.analysed(v, summaries)
         if out is not None and LAST_CHECKPOINT.get("path") == str(out / CHECKPOINT):
             files.append(out / CHECKPOINT)            # written by this run: listed with what it wrote
         res = SceneResult(self.name, quantities, 0.0, params=self.display(v), notes=list(notes),
-                          extra=extra, files=[f for f in files if f], data=analysed[3] if len(analysed) > 3 else None)
+                          extra=extra, files=[f for f in files if f], data=data)
         self.verdict(v, summaries, res)
         if out is not None:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]

@@ -167,16 +167,18 @@ class SpallScene(SceneDef):
                 "nsteps": stage.nsteps, "t_run": stage.t_run}
 
     def analyse(self, v, summaries):
-        q, notes, extra = {}, [], {}
+        q, notes, extra, analysed = {}, [], {}, []
         for sm in summaries:
-            qq, nn, ex = spall_quantities(sm, v)
+            a = analyse_spall(sm, v)
+            qq, nn, ex = spall_quantities(sm, v, a)
             q.update(qq)
             notes += nn
             extra[sm["name"]] = ex
-        return q, notes, extra
+            analysed.append(a)
+        return q, notes, extra, analysed
 
     def report(self, v, summaries, result, out):
-        files = [plot_spall(summaries, v, out / "spall.png")]
+        files = [plot_spall(summaries, result.data, v, out / "spall.png")]
         for sm in summaries:
             files.append(write_visar_csv(out / f"spall_visar_{sm['name']}.csv", sm))
             files.append(write_lmap_csv(out / f"spall_stress_map_{sm['name']}.csv", sm["lmap"]))
@@ -223,9 +225,9 @@ def analyse_spall(sm, v):
             "ring_T": T, "max_tension": tension, "max_compression": compression, "material": mat}
 
 
-def spall_quantities(sm, v):
-    """``(quantities, notes, extra)`` of one stage."""
-    a = analyse_spall(sm, v)
+def spall_quantities(sm, v, a=None):
+    """``(quantities, notes, extra)`` of one stage (``a``: its :func:`analyse_spall`, made when not given)."""
+    a = analyse_spall(sm, v) if a is None else a
     info, pb, ws, plane = sm["info"], a["pullback"], a["waves"], sm["plane"]
     p = "sc_" if sm["name"] == "single" else "pc_"
     r0 = info["r0"]
@@ -328,13 +330,13 @@ def write_lmap_csv(path, lmap):
     return path
 
 
-def plot_spall(summaries, v, path):
-    """VISAR traces with the pullback, the stress maps with the fitted waves, the fragment spectra."""
+def plot_spall(summaries, analysed, v, path):
+    """VISAR traces with the pullback, the stress maps with the fitted waves, the fragment spectra
+    (``analysed``: each stage's :func:`analyse_spall`)."""
     plt = matplotlib_agg()
     n = len(summaries)
     fig, axs = plt.subplots(n, 3, figsize=(16, 4.3 * n), squeeze=False)
-    for row, sm in enumerate(summaries):
-        a = analyse_spall(sm, v)
+    for row, (sm, a) in enumerate(zip(summaries, analysed)):
         info, pb, ws = sm["info"], a["pullback"], a["waves"]
         r0 = info["r0"]
         ax = axs[row, 0]

@@ -561,12 +561,12 @@ class TaylorScene(SceneDef):
                  "W_mm": m["W"] / units.mm, "test": None if test is None else test["name"],
                  "ledger_J": sm["ledger"], "wall_impulse_N_s": sm["impulse_N_s"], "n_clusters": sm["n"],
                  "steps": sm["steps"], "stepping_time_s": sm["t_run"], "stopped": bool(sm["reason"])}
-        return q, notes, extra
+        return q, notes, extra, m
 
     def report(self, v, summaries, result, out):
         sm = summaries[0]
         info = sm["info"]
-        m = analyse_rod(sm)
+        m = result.data
         test = find_taylor_test(info["L0"], info["D0"], info["V"])
         outline = taylor_outline(test["name"]) if test is not None and test["has_outline"] else None
         files = write_outline(out, m, info, outline, test)
