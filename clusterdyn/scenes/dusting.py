@@ -32,6 +32,7 @@ docs/theory.md 1.3); ``J=none`` shows the artefact.
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from ..errors import InputError
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import ledger_joules, matplotlib_agg
-from .lifecycle import SceneDef, Stage, scene_params
+from .lifecycle import SceneDef, Setup, Stage, scene_params
 from .shock import build_shock
 
 #: run time per sample length (the paper's 1.5 us for its 5 mm sample)
@@ -87,27 +88,44 @@ def _duration(v, length):
     return v.duration if v.duration is not None else DURATION_PER_LENGTH * length
 
 
+@dataclass
+class DustingSetup(Setup):
+    """A built dusting run (ASE units): the piston shock and what its analysis needs (the checkpoint's
+    payload, :class:`~clusterdyn.scenes.lifecycle.Setup`)."""
+
+    piston_index: np.ndarray = None  #: rows of the piston layer
+    probe: np.ndarray = None         #: rows of the rear layer (free-surface velocity)
+    g_max: int = 0                   #: largest dispersed fragment (clusters)
+    b: float = 0.0                   #: fragment bond length, in r0
+    area: float = 0.0                #: cross-section (Angstrom^2)
+    length: float = 0.0              #: sample length along x
+    x_rear: float = 0.0              #: rear surface at set-up
+    r0: float = 0.0
+    u: float = 0.0
+    cells: int = 0                   #: repeat cells along x
+    nsteps: int = 0
+    dt: float = 0.0
+    mass: float = 0.0                #: mass of the sample without the piston
+
+
 class DustingRecord:
     """Analysis state of a dusting run: dispersed clusters and free-surface velocity per frame.
 
     Parameters
     ----------
-    atoms, dyn :
-        The running sample and its dynamics.
-    info : dict
-        ``piston`` (rows of the piston layer), ``probe`` (rows of the rear layer), ``b``, ``g_max``,
-        ``area`` (Angstrom^2).
+    setup : DustingSetup
+        The running sample, its dynamics, the piston and probe rows, ``b``, ``g_max``, ``area``.
     """
 
     KEYS = ("t", "n_fragments", "n_clusters", "per_mm2", "mass_fraction", "surface", "fsv", "large_clusters")
 
-    def __init__(self, atoms, dyn, info):
-        self.atoms, self.dyn = atoms, dyn
-        n = len(atoms)
+    def __init__(self, setup):
+        self.atoms, self.dyn = setup.atoms, setup.dyn
+        n = len(self.atoms)
         self.exclude = np.zeros(n, bool)
-        self.exclude[np.asarray(info["piston"], dtype=np.int64)] = True
-        self.probe = np.asarray(info["probe"], dtype=np.int64)
-        self.g_max, self.b, self.area = int(info["g_max"]), float(info["b"]), float(info["area"])
+        self.exclude[np.asarray(setup.piston_index, dtype=np.int64)] = True
+        self.probe = np.asarray(setup.probe, dtype=np.int64)
+        self.g_max, self.b, self.area = int(setup.g_max), float(setup.b), float(setup.area)
         self.finder = FragmentFinder(self.b, exclude=self.exclude)
         self.series = {k: [] for k in self.KEYS}
 
@@ -159,6 +177,7 @@ class DustingScene(SceneDef):
     description = ("plane shock (piston at u) onto a smooth free surface: clusters dispersed per mm^2 and as a "
                    "mass fraction against time, clusters per layer (CD paper figs. 18-20)")
     params = scene_params(PARAMS, h5md_frames=20)
+    setup_class = DustingSetup
 
     def estimate_particles(self, v):
         from .lifecycle import fcc_count
@@ -186,19 +205,19 @@ class DustingScene(SceneDef):
         r0 = v.r0
         probe = np.nonzero(x > x.max() - v.probe * r0)[0]
         length = float(np.ptp(x)) + r0 / SQRT2
-        info = {"piston": np.nonzero(s.piston_mask)[0], "probe": probe, "g_max": v.g_max,
-                "b": v.b if v.b is not None else v.rc, "area": cross_section(atoms),
-                "length": length, "x_rear": float(x.max()), "r0": r0, "u": v.u, "cells": n,
-                "nsteps": int(math.ceil(_duration(v, length) / dyn.dt)), "dt": dyn.dt,
-                "mass": float(atoms.get_masses()[~s.piston_mask].sum())}
+        setup = DustingSetup(atoms, dyn, piston_index=s.piston_index, probe=probe, g_max=v.g_max,
+                             b=v.b if v.b is not None else v.rc, area=cross_section(atoms), length=length,
+                             x_rear=float(x.max()), r0=r0, u=v.u, cells=n,
+                             nsteps=int(math.ceil(_duration(v, length) / dyn.dt)), dt=dyn.dt,
+                             mass=float(atoms.get_masses()[~s.piston_mask].sum()))
         dyn.start_ledger()
-        return atoms, dyn, info
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
+    def attach(self, v, stage, setup):
         if v.duration is not None:          # a restart may lengthen the run
-            info["nsteps"] = int(math.ceil(v.duration / dyn.dt))
-        rec = DustingRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v.frames, info, on_frame=rec.frame, analysis=rec)
+            setup.nsteps = int(math.ceil(v.duration / setup.dyn.dt))
+        rec = DustingRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec)
 
     def retry(self, v, stage, exc, attempt):
         if exc.quantity != "timestep" or attempt > v.dt_retries:

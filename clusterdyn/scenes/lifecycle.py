@@ -222,13 +222,13 @@ class SceneDef:
         payload is ``info``."""
         if self.setup_class is None:
             return self.attach(v, stage, atoms, dyn, info)
-        return self._attached(v, stage, self.setup_class.restore(atoms, dyn, info), info)
+        return self._attached(v, stage, self.setup_class.restore(atoms, dyn, info))
 
-    def _attached(self, v, name, setup, info=None):
-        st = self.attach(v, name, setup)
+    def _attached(self, v, name, setup):
+        st = self.attach(v, name, setup)          # may change the set-up (a restart's longer run)
         st.setup = setup
         if not st.info:
-            st.info = setup.state() if info is None else info
+            st.info = setup.state()
         return st
 
     def finish(self, v, stage):
