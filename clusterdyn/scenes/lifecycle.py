@@ -112,6 +112,13 @@ class Setup:
     atoms: object = field(repr=False, metadata=LIVE)
     dyn: object = field(repr=False, metadata=LIVE)
 
+    def __getitem__(self, key):
+        """A field by name, so that analysis helpers read a set-up and its :meth:`state` (a summary's
+        or a checkpoint's dict) alike."""
+        if key in self.__dataclass_fields__:
+            return getattr(self, key)
+        raise KeyError(key)
+
     def state(self):
         """The encodable fields as a dict (tuples as lists), for a checkpoint."""
         return {f.name: _plain(getattr(self, f.name)) for f in fields(self) if not f.metadata.get("live")}

@@ -25,6 +25,7 @@ periodic cross-section is rescaled toward zero lateral stress.
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
 from .common import make_piston, matplotlib_agg, piston_thickness, thermal_noise
-from .lifecycle import SceneDef, Stage, scene_params
+from .lifecycle import SceneDef, Setup, Stage, scene_params
 from ..analysis.shock import ShockTracker
 from .shock import ShockSetup, shock_quantities, shock_stage, shock_summary
 
@@ -214,11 +215,12 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
 class ImpactRecord:
     """Analysis state of an impact run: slab profiles every frame and the rear free-surface velocity."""
 
-    def __init__(self, atoms, dyn, info):
-        r0, self.v = info["r0"], info["v"]
+    def __init__(self, setup):
+        atoms, dyn = setup.atoms, setup.dyn
+        r0, self.v = setup.r0, setup.v
         x = atoms.positions[:, 0]
         self.rec = ProfileRecorder(2.0 * r0, axis=0, lo=x.min() - 10 * r0, hi=x.max() + 10 * r0)
-        self.rear = np.asarray(info["rear"], dtype=np.int64)
+        self.rear = np.asarray(setup.rear, dtype=np.int64)
         self.m_rear = atoms.get_masses()[self.rear]
         self.atoms, self.dyn = atoms, dyn
         self.fsv_t, self.fsv_v = [], []
@@ -243,13 +245,33 @@ class ImpactRecord:
         self.fsv_v = [float(x) for x in st["fsv_v"]]
 
 
-def impact_info(s):
-    """The encodable set-up facts of a :func:`build_impact` dict (what the analysis and a restart need)."""
-    info = {k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer", "target", "width", "sample", "c0")}
-    info["rear"] = np.nonzero(s["rear"])[0]
-    info["reports"] = [r if r is not None else {} for r in s["reports"]]
-    info["relax"] = s["relax"] if s["relax"] is not None else {}
-    return info
+@dataclass
+class ImpactSetup(Setup):
+    """A built plate impact (ASE units): the two plates with their dynamics, and what the analysis
+    needs (the checkpoint's payload, :class:`~clusterdyn.scenes.lifecycle.Setup`)."""
+
+    r0: float = 0.0
+    v: float = 0.0                 #: impact speed (flyer against the target at rest, lab frame: +-v/2)
+    dt: float = 0.0
+    x_impact: float = 0.0          #: the plates' contact plane at set-up
+    x_rear: float = 0.0            #: the target's rear face at set-up
+    flyer: float = 0.0             #: plate thicknesses
+    target: float = 0.0
+    width: float = 0.0             #: periodic width across
+    sample: str = "single"
+    c0: float = 0.0
+    rear: np.ndarray = None        #: rows of the target's rear layer (the VISAR probe)
+    reports: list = None           #: the builder's report on each plate ({} for a single crystal)
+    relax: dict = None             #: the relaxation's record ({} when none ran)
+    nsteps: int = 0
+
+    @classmethod
+    def built(cls, s, **more):
+        """The set-up of a :func:`build_impact` dict ``s`` (``more``: a subclass's fields)."""
+        return cls(s["atoms"], s["dyn"], **{k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer",
+                                                                 "target", "width", "sample", "c0")},
+                   rear=np.nonzero(s["rear"])[0], reports=[r if r is not None else {} for r in s["reports"]],
+                   relax=s["relax"] if s["relax"] is not None else {}, **more)
 
 
 def impact_duration(info, duration=None):
@@ -548,6 +570,7 @@ class PlateImpactScene(SceneDef):
     description = ("two Al plates colliding: stress and von Mises profiles, precursor, VISAR trace; "
                    "single crystal vs polycrystal")
     params = scene_params(PARAMS)
+    setup_class = ImpactSetup
 
     def check(self, v):
         if v.sample != "single" and v.grain_size > 2 * min(v.flyer, v.target):
@@ -565,18 +588,18 @@ class PlateImpactScene(SceneDef):
         s = build_impact(stage, "Al", v.v, v.r0, v.flyer, v.target, v.width, v.grain_size,
                          v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
                          boundaries=v.boundaries, packing=v.packing)
-        info = impact_info(s)
-        info["nsteps"] = int(math.ceil(impact_duration(info, v.duration) / s["dt"]))
-        return s["atoms"], s["dyn"], info
+        setup = ImpactSetup.built(s)
+        setup.nsteps = int(math.ceil(impact_duration(setup, v.duration) / s["dt"]))
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
-        end = impact_duration(info, v.duration)
-        late = [t for t in _profile_times(v.profile_times, info) if t > end * (1 + 1e-9)]
+    def attach(self, v, stage, setup):
+        end = impact_duration(setup, v.duration)
+        late = [t for t in _profile_times(v.profile_times, setup) if t > end * (1 + 1e-9)]
         if late:
             raise InputError("profile_times", v.profile_times, f"times within the run, 0-{end / units.ns:.4g} ns "
                              "(set duration to run longer)")
-        rec = ImpactRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v.frames, info, on_frame=rec.frame, analysis=rec,
+        rec = ImpactRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
@@ -607,10 +630,10 @@ class PlateImpactScene(SceneDef):
             a, b = results["single"][2], results["polycrystal"][2]
             quantities["plateau_ratio"] = Quantity(b["vm_plateau"] / a["vm_plateau"], "",
                                                    note="polycrystal / single-crystal intensity plateau")
-        return quantities, notes, {}
+        return quantities, notes, {}, results
 
     def report(self, v, summaries, result, out):
-        results = self._results(summaries)
+        results = result.data
         times_by = {name: _profile_times(v.profile_times, info) for name, (info, _, _) in results.items()}
         plot_impact(results, out / "plate_impact_profiles.png", times_by)
         plot_visar(results, out / "plate_impact_visar.png")

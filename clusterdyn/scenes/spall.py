@@ -31,6 +31,7 @@ with a Lagrangian stress map):
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from ..materials import get_material
 from .base import Param, Quantity, register_scene
 from .common import ledger_joules, matplotlib_agg
 from .lifecycle import SceneDef, Stage, scene_params
-from .plate_impact import ImpactRecord, build_impact, impact_info, write_visar_csv
+from .plate_impact import ImpactRecord, ImpactSetup, build_impact, write_visar_csv
 
 #: perfect [100] lattice, uniaxial strain, rc = 1.15: the tension it holds (docs/theory.md 1.8)
 IDEAL_SPALL_100_GPA = 19.2
@@ -90,14 +91,25 @@ def spall_duration(info, duration=None):
     return slow * (info["target"] + 6.0 * info["flyer"]) / cL
 
 
+@dataclass
+class SpallSetup(ImpactSetup):
+    """An :class:`~clusterdyn.scenes.plate_impact.ImpactSetup` with what the spall analysis adds."""
+
+    x0: np.ndarray = None          #: every particle's x at set-up (the material coordinates)
+    target_rows: np.ndarray = None
+    x_flyer_rear: float = 0.0
+    x_target_front: float = 0.0
+    rho0: float = 0.0              #: the target's density at rest
+
+
 class SpallRecord(ImpactRecord):
     """An :class:`~clusterdyn.scenes.plate_impact.ImpactRecord` (slab profiles, VISAR trace) with a
     :class:`~clusterdyn.analysis.spall.LagrangianMap` of sigma_xx in material coordinates (r0 bins)."""
 
-    def __init__(self, atoms, dyn, info):
-        super().__init__(atoms, dyn, info)
-        r0 = info["r0"]
-        self.lmap = LagrangianMap(np.asarray(info["x0"], float), r0, r0 ** 3 / SQRT2)
+    def __init__(self, setup):
+        super().__init__(setup)
+        r0 = setup.r0
+        self.lmap = LagrangianMap(np.asarray(setup.x0, float), r0, r0 ** 3 / SQRT2)
 
     def frame(self, d):
         vir = super().frame(d)
@@ -121,6 +133,7 @@ class SpallScene(SceneDef):
     description = ("thin Al flyer on a thicker target: VISAR trace, pullback, spall strength (c_b and c_L), "
                    "spall plane vs the measured wave speeds, fragments; single crystal vs polycrystal")
     params = scene_params(PARAMS)
+    setup_class = SpallSetup
 
     def check(self, v):
         if v.target <= v.flyer:
@@ -139,19 +152,18 @@ class SpallScene(SceneDef):
                          v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
                          packing=v.packing)
         atoms = s["atoms"]
-        info = impact_info(s)
         plate = atoms.arrays["plate"]
         x0 = atoms.positions[:, 0].copy()
-        info.update({"x0": x0, "target_rows": np.nonzero(plate == 1)[0],
-                     "x_flyer_rear": float(x0[plate == 0].min()), "x_target_front": float(x0[plate == 1].min()),
-                     "rho0": _density(atoms, plate == 1, s["width"], s["r0"]),
-                     "nsteps": int(math.ceil(spall_duration(info, v.duration) / s["dt"]))})
+        setup = SpallSetup.built(s, x0=x0, target_rows=np.nonzero(plate == 1)[0],
+                                 x_flyer_rear=float(x0[plate == 0].min()), x_target_front=float(x0[plate == 1].min()),
+                                 rho0=_density(atoms, plate == 1, s["width"], s["r0"]))
+        setup.nsteps = int(math.ceil(spall_duration(setup, v.duration) / s["dt"]))
         s["dyn"].start_ledger()
-        return atoms, s["dyn"], info
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
-        rec = SpallRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v.frames, info, on_frame=rec.frame, analysis=rec,
+    def attach(self, v, stage, setup):
+        rec = SpallRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
