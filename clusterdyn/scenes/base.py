@@ -390,7 +390,7 @@ def register_scene(scene):
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer",
+SCENE_MODULES = ["shock", "plate_impact", "polycrystal_shock", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer",
                  "ejecta", "jets", "mca_friction"]
 
 
