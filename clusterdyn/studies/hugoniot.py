@@ -114,7 +114,7 @@ def _fwd_with(fwd, **kw):
     d.update({k: v for k, v in kw.items() if v is not None})
     d.setdefault("h5md", "false")
     d.setdefault("checkpoint_every", "0")
-    return display_text(get_scene("shock"), d)      # the sweep's numbers are in display units
+    return d
 
 
 # --------------------------------------------------------------------------- static checks
@@ -219,10 +219,10 @@ def hugoniot_study(overrides=None, out=None, progress=True, quiet=None):
 
     def run_row(ov):
         res, err, wall = run_scene(scene, ov, progress=progress, cache=cache, reuse=v["reuse"])
-        pv = scene.display(scene.parse(ov))
+        pv = scene.display(scene.parse(display_text(scene, ov)))     # the sweep's numbers: display units
         # the sample that ran (size=auto resolved)
         pv["size"] = tuple(res.extra["size_used"]) if res is not None and "size_used" in res.extra else \
-            tuple(ShockScene.size(scene.parse(ov)))
+            tuple(ShockScene.size(scene.parse(display_text(scene, ov))))
         return res, shock_row(res, err, wall), pv
 
     rows = []
