@@ -120,6 +120,7 @@ def _print_run_help(scene_name, parser):
 
 def cmd_run(args):
     from .scenes import get_scene
+    from .scenes.base import display_text
     if args.help or args.scene is None:
         code = _print_run_help(args.scene, args.run_parser)
         return code if args.help else EXIT_INPUT
@@ -135,7 +136,7 @@ def cmd_run(args):
             if k not in known:
                 raise InputError("--config", f"{args.config}: {k}", f"a parameter of scene '{scene.name}': "
                                  + ", ".join(known))
-        overrides.update(cfg)
+        overrides.update(display_text(scene, cfg))      # a TOML number is in the display unit, as on the CLI
     overrides.update(_parse_sets(args.set))
     kw = {}
     if args.restart:

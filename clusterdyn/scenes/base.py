@@ -8,12 +8,17 @@ with units, each next to its reference and relative error, plus the wall
 time.  The CLI prints it and writes it as JSON beside the H5MD file.
 """
 
+import dataclasses
 import importlib
 import json
 import math
+import numbers
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from .. import units
 from ..errors import InputError
@@ -81,8 +86,29 @@ class Param:
         rb = ")" if hi == "inf" else "]"
         return f"{base} in {lb}{lo}, {hi}{rb}{u}" + (" or none" if self.optional else "")
 
+    def takes_ase_number(self, value):
+        """True when ``value`` is a bare Python number for a parameter with a unit: from Python it is
+        read in ASE units (:meth:`parse_ase`), as builders and calculators take it."""
+        return (self.unit is not None and self.kind == "float" and type(self).parse is Param.parse
+                and isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)))
+
+    def parse_ase(self, value):
+        """A bare number in ASE units (``5 * units.um``), checked against the range in the display unit;
+        returned as given (a float)."""
+        num = float(value)
+        disp = num / units.NAMED[self.unit]
+        shown = f"{num:g} (ASE units: {disp:g} {self.unit})"
+        if not math.isfinite(num):
+            raise InputError(self.name, shown, self._allowed())
+        self._check_range(disp, shown)
+        return num
+
     def parse(self, value):
-        """Parse text (CLI) or a Python value; return the value in ASE units."""
+        """Parse text (CLI) or a value; return the value in ASE units.
+
+        A bare number is read in the parameter's display unit (as the defaults and the CLI
+        write it); a scene's :meth:`~clusterdyn.scenes.lifecycle.SceneDef.parse` reads bare
+        Python numbers in ASE units instead (:meth:`parse_ase`)."""
         text = value
         if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off")):
             if self.optional:
@@ -158,6 +184,60 @@ class Param:
         return ase_val
 
 
+class SceneValues(Mapping):
+    """Base of a scene's parameter values: a frozen dataclass with one field per declared
+    :class:`Param` (ASE units), made by :func:`values_class`.
+
+    Read a value as an attribute (``v.r0``); the values are also a read-only mapping
+    (``v["r0"]``, ``v.get``, ``**v``, ``v.items()``) over the declared parameters.  A changed
+    copy is ``v.replace(dt_factor=...)``.  ``retried`` holds one line per attempt the
+    lifecycle started again after an instability (:meth:`SceneDef.retry`), oldest first.
+    """
+
+    def __getitem__(self, key):
+        if key in self._names:
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def replace(self, **changes):
+        """A copy with ``changes`` (parameter names or ``retried``)."""
+        return dataclasses.replace(self, **changes)
+
+    def __repr__(self):
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.items())})"
+
+
+def display_text(scene, overrides):
+    """``overrides`` with every bare number of a parameter that has a unit written as text in that unit
+    (``{"r0": 5.0}`` -> ``{"r0": "5.0um"}``): for callers whose numbers are in the display units the
+    CLI and ``clusterdyn list`` use, since :meth:`SceneDef.parse` reads bare Python numbers in ASE
+    units.  Exact: the text is the number's ``repr``."""
+    known = {p.name: p for p in scene.params}
+    out = {}
+    for k, x in (overrides or {}).items():
+        p = known.get(k)
+        out[k] = f"{float(x)!r}{p.unit}" if p is not None and p.takes_ase_number(x) else x
+    return out
+
+
+def values_class(name, params):
+    """The frozen dataclass of a scene's parameter values (a :class:`SceneValues`): one field per
+    :class:`Param` of ``params``, in order, plus ``retried``."""
+    names = tuple(p.name for p in params)
+    cls_name = "".join(w.capitalize() for w in re.split(r"[^0-9a-zA-Z]+", name) if w) + "Values"
+    fields = [(n, object) for n in names] + [("retried", tuple, field(default=()))]
+    cls = dataclasses.make_dataclass(cls_name, fields, bases=(SceneValues,), frozen=True, eq=True)
+    cls._names = names
+    cls.__module__ = __name__
+    return cls
+
+
 _FAMILIES = {
     "length": ("A", "Ang", "nm", "um", "mm", "m", "cm"),
     "time": ("fs", "ps", "ns", "us", "ms", "s"),
@@ -222,6 +302,7 @@ def _clean(v):
 class SceneResult:
     """What a scene returns: quantities (with units, references, errors) and wall time.
 
+    ``data`` is what the scene's analysis kept for its report (not written).
     ``steady`` is the scene's verdict on whether what it measured had settled
     (None: the scene makes no such check); ``warnings`` are one-line messages
     the CLI prints on stderr (e.g. why a run is not steady and what would fix it).
@@ -236,6 +317,8 @@ class SceneResult:
     extra: dict = field(default_factory=dict)
     steady: bool = None
     warnings: list = field(default_factory=list)
+    #: what the scene's analysis kept for its report (in memory only, not in the JSON)
+    data: object = field(default=None, repr=False, compare=False)
 
     def as_dict(self):
         d = {"scene": self.scene}
@@ -307,7 +390,7 @@ def register_scene(scene):
 
 
 #: scene modules, imported on first use (each adds its scenes to SCENES)
-SCENE_MODULES = ["shock", "plate_impact", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer",
+SCENE_MODULES = ["shock", "plate_impact", "polycrystal_shock", "mca", "dusting", "spall", "taylor", "hypervelocity", "multilayer",
                  "ejecta", "jets", "mca_friction"]
 
 

@@ -168,7 +168,15 @@ def matplotlib_agg():
     return plt
 
 
-def plain_ledger(ledger):
-    """An energy ledger (:meth:`clusterdyn.md.DampedVerlet.energy_ledger`) as JSON-encodable values:
-    floats, and lists for the vector entries (``removed_momentum``)."""
-    return {k: (np.asarray(x).tolist() if np.ndim(x) else float(x)) for k, x in ledger.items()}
+def ledger_joules(ledger):
+    """An energy ledger (:meth:`clusterdyn.md.DampedVerlet.energy_ledger`, eV) as JSON-encodable values
+    in the unit every scene reports energies in, joules; the removed momentum in N s
+    (``removed_momentum_N_s``)."""
+    from .. import units
+    out = {}
+    for k, x in ledger.items():
+        if k == "removed_momentum":
+            out["removed_momentum_N_s"] = (np.asarray(x, float) / (units.N * units.s)).tolist()
+        else:
+            out[k] = float(x) / units.J
+    return out

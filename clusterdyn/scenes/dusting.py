@@ -32,6 +32,7 @@ docs/theory.md 1.3); ``J=none`` shows the artefact.
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,8 +44,8 @@ from ..build.lattice import SQRT2
 from ..errors import InputError
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg, plain_ledger
-from .lifecycle import SceneDef, Stage, scene_params
+from .common import ledger_joules, matplotlib_agg
+from .lifecycle import SceneDef, Setup, Stage, scene_params
 from .shock import build_shock
 
 #: run time per sample length (the paper's 1.5 us for its 5 mm sample)
@@ -80,11 +81,31 @@ PARAMS = [
 
 
 def _cells(v):
-    return max(1, int(round(v["length"] / (SQRT2 * v["r0"]))))
+    return max(1, int(round(v.length / (SQRT2 * v.r0))))
 
 
 def _duration(v, length):
-    return v["duration"] if v["duration"] is not None else DURATION_PER_LENGTH * length
+    return v.duration if v.duration is not None else DURATION_PER_LENGTH * length
+
+
+@dataclass
+class DustingSetup(Setup):
+    """A built dusting run (ASE units): the piston shock and what its analysis needs (the checkpoint's
+    payload, :class:`~clusterdyn.scenes.lifecycle.Setup`)."""
+
+    piston_index: np.ndarray = None  #: rows of the piston layer
+    probe: np.ndarray = None         #: rows of the rear layer (free-surface velocity)
+    g_max: int = 0                   #: largest dispersed fragment (clusters)
+    b: float = 0.0                   #: fragment bond length, in r0
+    area: float = 0.0                #: cross-section (Angstrom^2)
+    length: float = 0.0              #: sample length along x
+    x_rear: float = 0.0              #: rear surface at set-up
+    r0: float = 0.0
+    u: float = 0.0
+    cells: int = 0                   #: repeat cells along x
+    nsteps: int = 0
+    dt: float = 0.0
+    mass: float = 0.0                #: mass of the sample without the piston
 
 
 class DustingRecord:
@@ -92,22 +113,19 @@ class DustingRecord:
 
     Parameters
     ----------
-    atoms, dyn :
-        The running sample and its dynamics.
-    info : dict
-        ``piston`` (rows of the piston layer), ``probe`` (rows of the rear layer), ``b``, ``g_max``,
-        ``area`` (Angstrom^2).
+    setup : DustingSetup
+        The running sample, its dynamics, the piston and probe rows, ``b``, ``g_max``, ``area``.
     """
 
     KEYS = ("t", "n_fragments", "n_clusters", "per_mm2", "mass_fraction", "surface", "fsv", "large_clusters")
 
-    def __init__(self, atoms, dyn, info):
-        self.atoms, self.dyn = atoms, dyn
-        n = len(atoms)
+    def __init__(self, setup):
+        self.atoms, self.dyn = setup.atoms, setup.dyn
+        n = len(self.atoms)
         self.exclude = np.zeros(n, bool)
-        self.exclude[np.asarray(info["piston"], dtype=np.int64)] = True
-        self.probe = np.asarray(info["probe"], dtype=np.int64)
-        self.g_max, self.b, self.area = int(info["g_max"]), float(info["b"]), float(info["area"])
+        self.exclude[np.asarray(setup.piston_index, dtype=np.int64)] = True
+        self.probe = np.asarray(setup.probe, dtype=np.int64)
+        self.g_max, self.b, self.area = int(setup.g_max), float(setup.b), float(setup.area)
         self.finder = FragmentFinder(self.b, exclude=self.exclude)
         self.series = {k: [] for k in self.KEYS}
 
@@ -159,58 +177,59 @@ class DustingScene(SceneDef):
     description = ("plane shock (piston at u) onto a smooth free surface: clusters dispersed per mm^2 and as a "
                    "mass fraction against time, clusters per layer (CD paper figs. 18-20)")
     params = scene_params(PARAMS, h5md_frames=20)
+    setup_class = DustingSetup
 
     def estimate_particles(self, v):
         from .lifecycle import fcc_count
-        return fcc_count(v["length"] * (v["periods"] * SQRT2 * v["r0"]) ** 2, v["r0"])
+        return fcc_count(v.length * (v.periods * SQRT2 * v.r0) ** 2, v.r0)
 
     def check(self, v):
         n = _cells(v)
         if n < MIN_CELLS:
-            raise InputError("length", f"{v['length'] / units.mm:g}mm",
-                             f"at least {MIN_CELLS} repeat cells (sqrt 2 r0 = {SQRT2 * v['r0'] / units.um:g} um "
-                             f"each): {MIN_CELLS * SQRT2 * v['r0'] / units.mm:.3g} mm or more")
-        if v["probe"] > n * SQRT2 / 2:
-            raise InputError("probe", f"{v['probe']:g}", f"a depth in [0.5, {n * SQRT2 / 2:.4g}] r0 (half the "
+            raise InputError("length", f"{v.length / units.mm:g}mm",
+                             f"at least {MIN_CELLS} repeat cells (sqrt 2 r0 = {SQRT2 * v.r0 / units.um:g} um "
+                             f"each): {MIN_CELLS * SQRT2 * v.r0 / units.mm:.3g} mm or more")
+        if v.probe > n * SQRT2 / 2:
+            raise InputError("probe", f"{v.probe:g}", f"a depth in [0.5, {n * SQRT2 / 2:.4g}] r0 (half the "
                              f"sample's length: the probe must stay near the rear face)")
-        if v["periods"] * SQRT2 < 2.0 * v["rc"]:
-            raise InputError("periods", v["periods"], f"a cross-section at least 2 rc r0 wide "
-                             f"({math.ceil(2 * v['rc'] / SQRT2)} periods at rc = {v['rc']:g})")
+        if v.periods * SQRT2 < 2.0 * v.rc:
+            raise InputError("periods", v.periods, f"a cross-section at least 2 rc r0 wide "
+                             f"({math.ceil(2 * v.rc / SQRT2)} periods at rc = {v.rc:g})")
 
     def setup(self, v, stage):
         n = _cells(v)
-        s = build_shock("Al", v["u"], "100", (n, v["periods"], v["periods"]), v["r0"], v["rc"], v["J"],
-                        v["noise"], v["seed"], v["dt_factor"])
+        s = build_shock("Al", v.u, "100", (n, v.periods, v.periods), v.r0, v.rc, v.J,
+                        v.noise, v.seed, v.dt_factor)
         atoms, dyn = s.atoms, s.dyn
         x = atoms.positions[:, 0]
-        r0 = v["r0"]
-        probe = np.nonzero(x > x.max() - v["probe"] * r0)[0]
+        r0 = v.r0
+        probe = np.nonzero(x > x.max() - v.probe * r0)[0]
         length = float(np.ptp(x)) + r0 / SQRT2
-        info = {"piston": np.nonzero(s.piston_mask)[0], "probe": probe, "g_max": v["g_max"],
-                "b": v["b"] if v["b"] is not None else v["rc"], "area": cross_section(atoms),
-                "length": length, "x_rear": float(x.max()), "r0": r0, "u": v["u"], "cells": n,
-                "nsteps": int(math.ceil(_duration(v, length) / dyn.dt)), "dt": dyn.dt,
-                "mass": float(atoms.get_masses()[~s.piston_mask].sum())}
+        setup = DustingSetup(atoms, dyn, piston_index=s.piston_index, probe=probe, g_max=v.g_max,
+                             b=v.b if v.b is not None else v.rc, area=cross_section(atoms), length=length,
+                             x_rear=float(x.max()), r0=r0, u=v.u, cells=n,
+                             nsteps=int(math.ceil(_duration(v, length) / dyn.dt)), dt=dyn.dt,
+                             mass=float(atoms.get_masses()[~s.piston_mask].sum()))
         dyn.start_ledger()
-        return atoms, dyn, info
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
-        if v["duration"] is not None:          # a restart may lengthen the run
-            info["nsteps"] = int(math.ceil(v["duration"] / dyn.dt))
-        rec = DustingRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec)
+    def attach(self, v, stage, setup):
+        if v.duration is not None:          # a restart may lengthen the run
+            setup.nsteps = int(math.ceil(v.duration / setup.dyn.dt))
+        rec = DustingRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec)
 
     def retry(self, v, stage, exc, attempt):
-        if exc.quantity != "timestep" or attempt > v["dt_retries"]:
+        if exc.quantity != "timestep" or attempt > v.dt_retries:
             return None
-        note = f"dt factor {v['dt_factor']:g}: stopped at step {exc.step} by the stiffness check"
-        return {**v, "dt_factor": 0.5 * v["dt_factor"], "_retried": list(v.get("_retried", [])) + [note]}
+        note = f"dt factor {v.dt_factor:g}: stopped at step {exc.step} by the stiffness check"
+        return v.replace(dt_factor=0.5 * v.dt_factor, retried=v.retried + (note,))
 
     def finish(self, v, stage):
         rec, atoms, info = stage.analysis, stage.atoms, stage.info
         disp = rec.measure()
         g, ng = disp.spectrum()
-        xc, nl = layer_counts(atoms, v["layer"] * info["r0"], exclude=rec.exclude)
+        xc, nl = layer_counts(atoms, v.layer * info["r0"], exclude=rec.exclude)
         L = stage.dyn.energy_ledger()
         return {"series": rec.arrays(), "layers_x": xc, "layers_n": nl, "t_end": stage.dyn.get_time(),
                 "spectrum_g": g, "spectrum_n": ng, "surface": disp.surface, "ledger": L, "n": len(atoms),
@@ -220,13 +239,13 @@ class DustingScene(SceneDef):
     def analyse(self, v, summaries):
         sm = summaries[0]
         s, info, L = sm["series"], sm["info"], sm["ledger"]
-        u = v["u"]
-        per_layer = 4 * v["periods"] ** 2 / 2          # clusters in one (200) plane of the cross-section
+        u = v.u
+        per_layer = 4 * v.periods ** 2 / 2          # clusters in one (200) plane of the cross-section
         ta, plateau = surface_plateau(s["t"], s["fsv"], u)
         resid = L["residual"] / L["energy_in"]
         q = {
             "dispersed_per_mm2": Quantity(s["per_mm2"][-1], "1/mm2",
-                                          note=f"clusters in fragments of <= {v['g_max']} beyond the rear surface "
+                                          note=f"clusters in fragments of <= {v.g_max} beyond the rear surface "
                                                f"at t = {sm['t_end'] / units.us:.3g} us"),
             "dispersed_clusters": Quantity(s["n_clusters"][-1], "",
                                            note=f"on a cross-section of {info['area'] / units.um ** 2:.0f} um^2"),
@@ -236,24 +255,24 @@ class DustingScene(SceneDef):
             "mass_fraction": Quantity(s["mass_fraction"][-1], "", note="dispersed mass / sample mass"),
             "max_per_mm2": Quantity(float(np.max(s["per_mm2"])), "1/mm2", note="largest count over the run"),
             "large_ejected_clusters": Quantity(s["large_clusters"][-1], "",
-                                               note=f"clusters in fragments of > {v['g_max']} beyond the surface"),
+                                               note=f"clusters in fragments of > {v.g_max} beyond the surface"),
             "fsv_plateau": Quantity(plateau / units.km_s, "km/s", 2 * u / units.km_s,
                                     note="free-surface velocity plateau vs 2u (acoustic doubling, approximate)"),
             "t_arrival": Quantity(ta / units.us, "us", note="shock at the rear surface (free surface above u)"),
             "ledger_residual": Quantity(resid, "", note="energy ledger residual / energy put in"),
         }
-        notes = [f"{sm['n']} clusters ({info['cells']} cells x {v['periods']} x {v['periods']}), sample "
+        notes = [f"{sm['n']} clusters ({info['cells']} cells x {v.periods} x {v.periods}), sample "
                  f"{info['length'] / units.mm:.3f} mm, {sm['nsteps']} steps of {info['dt'] / units.ns:.4g} ns, "
                  f"{sm['t_run']:.1f} s stepping, {sm['nbuilds']} list builds",
                  "drive: piston (first 1.5 r0) at u for the whole run",
-                 f"dispersed: fragments of <= {v['g_max']} clusters whose centre lies > b r0 beyond the main "
-                 f"body's (largest fragment's) rear surface (b = {info['b']:g}); damping {'off' if v['J'] is None else 'J = %g' % v['J']}",
-                 "energy ledger (eV): kinetic {kinetic:.6g}, potential {potential:.6g}, piston work {drive_work:.6g}, "
+                 f"dispersed: fragments of <= {v.g_max} clusters whose centre lies > b r0 beyond the main "
+                 f"body's (largest fragment's) rear surface (b = {info['b']:g}); damping {'off' if v.J is None else 'J = %g' % v.J}",
+                 "energy ledger (J): kinetic {kinetic:.6g}, potential {potential:.6g}, piston work {drive_work:.6g}, "
                  "layer kinetic {layer_kinetic:.6g}, damping loss {damping_loss:.6g}, energy in {energy_in:.6g}, "
-                 "residual {residual:.3g}".format(**L)]
-        for r in v.get("_retried", []):
+                 "residual {residual:.3g}".format(**ledger_joules(L))]
+        for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
-        extra = {"ledger_eV": plain_ledger(L), "n_particles": sm["n"], "n_steps": sm["nsteps"],
+        extra = {"ledger_J": ledger_joules(L), "n_particles": sm["n"], "n_steps": sm["nsteps"],
                  "stepping_time_s": sm["t_run"],
                  "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()},
                  "t_end_us": sm["t_end"] / units.us, "area_um2": info["area"] / units.um ** 2,
@@ -261,7 +280,7 @@ class DustingScene(SceneDef):
                  "series": {"t_us": (s["t"] / units.us).tolist(), "per_mm2": s["per_mm2"].tolist(),
                             "mass_fraction": s["mass_fraction"].tolist(), "fsv_km_s": (s["fsv"] / units.km_s).tolist()},
                  "layers": {"x_mm": (sm["layers_x"] / units.mm).tolist(), "n": sm["layers_n"].tolist(),
-                            "thickness_r0": v["layer"]}}
+                            "thickness_r0": v.layer}}
         return q, notes, extra
 
     def report(self, v, summaries, result, out):
@@ -305,10 +324,10 @@ def plot_dusting(sm, v, path):
     ax2 = ax.twinx()
     ax2.plot(t, 100 * s["mass_fraction"], "C1--", label="mass fraction")
     ax2.set_ylabel("dispersed mass fraction (%)", color="C1")
-    ax.set_title(f"u = {v['u'] / units.km_s:g} km/s, rc = {v['rc']:g}, "
-                 f"{'no damping' if v['J'] is None else 'J = %g' % v['J']}, g <= {v['g_max']}")
+    ax.set_title(f"u = {v.u / units.km_s:g} km/s, rc = {v.rc:g}, "
+                 f"{'no damping' if v.J is None else 'J = %g' % v.J}, g <= {v.g_max}")
     axs[1].plot(t, s["fsv"] / units.km_s, "k-")
-    axs[1].axhline(2 * v["u"] / units.km_s, color="gray", ls=":", lw=0.8, label="2u")
+    axs[1].axhline(2 * v.u / units.km_s, color="gray", ls=":", lw=0.8, label="2u")
     axs[1].set_xlabel("t (us)")
     axs[1].set_ylabel("free-surface velocity (km/s)")
     axs[1].legend(fontsize=8)
@@ -317,7 +336,7 @@ def plot_dusting(sm, v, path):
     axs[2].step(x, sm["layers_n"], where="mid", lw=0.8)
     axs[2].axvline(sm["surface"] / units.mm, color="r", lw=0.6, ls="--", label="main body's rear surface")
     axs[2].set_xlabel("x (mm)")
-    axs[2].set_ylabel(f"clusters per layer ({v['layer']:g} r0 thick)")
+    axs[2].set_ylabel(f"clusters per layer ({v.layer:g} r0 thick)")
     axs[2].set_title(f"layers at t = {sm['t_end'] / units.us:.3g} us (CD paper fig. 20)")
     axs[2].legend(fontsize=8)
     fig.tight_layout()

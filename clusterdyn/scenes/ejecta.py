@@ -155,7 +155,7 @@ def drive_params(pressure, flat, release, t_end, J=50.0, drive="piston"):
 
 
 def _dir_key(v):
-    return {"100": (1, 0, 0), "110": (1, 1, 0), "111": (1, 1, 1)}[v["direction"]]
+    return {"100": (1, 0, 0), "110": (1, 1, 0), "111": (1, 1, 1)}[v.direction]
 
 
 def flat_sample(material, r0, *, depth, width, axis=0, direction=(1, 0, 0), slab_cells=2):
@@ -197,54 +197,54 @@ class ProfiledShockScene(SceneDef):
     # -- drive ---------------------------------------------------------------------------
     def drive(self, v, r0):
         """``(history Table, info)``: the drive's history (speeds or stresses) and how it was chosen."""
-        mat = get_material(v["material"])
-        info = {"material": mat.name, "kind": v["drive"]}
+        mat = get_material(v.material)
+        info = {"material": mat.name, "kind": v.drive}
         try:
-            hug = cd_hugoniot(mat.name, J=v["J"], direction=v["direction"], rc=v["rc"])
+            hug = cd_hugoniot(mat.name, J=v.J, direction=v.direction, rc=v.rc)
         except InputError:
             hug = None
         Du = hugoniot_interpolant(hug["u"], hug["D"]) if hug is not None and len(hug["u"]) >= 2 else None
         Pu = (lambda x: pressure_at(x, hug)) if hug is not None and len(hug["u"]) >= 2 else None
-        if v["drive_csv"] is not None:
+        if v.drive_csv is not None:
             from .lifecycle import read_history_csv
-            hist, kind = read_history_csv("drive_csv", v["drive_csv"], kinds=("u", "sigma"))
+            hist, kind = read_history_csv("drive_csv", v.drive_csv, kinds=("u", "sigma"))
             stress = hist.values.ndim == 1 and kind == "sigma"
             if hist.values.ndim != 1:
-                raise InputError("drive_csv", v["drive_csv"], "a CSV of one u_<unit> or sigma_<unit> column")
-            if stress != (v["drive"] == "pressure"):
-                raise InputError("drive_csv", v["drive_csv"], "a u_<unit> column with drive=piston, a sigma_<unit> "
+                raise InputError("drive_csv", v.drive_csv, "a CSV of one u_<unit> or sigma_<unit> column")
+            if stress != (v.drive == "pressure"):
+                raise InputError("drive_csv", v.drive_csv, "a u_<unit> column with drive=piston, a sigma_<unit> "
                                  "column with drive=pressure")
             peak = float(np.abs(hist.values).max())
             if not peak > 0:
-                raise InputError("drive_csv", v["drive_csv"], "a history with a non-zero value")
+                raise InputError("drive_csv", v.drive_csv, "a history with a non-zero value")
             top = hist.times[np.abs(hist.values) >= 0.95 * peak]
-            u = peak if not stress else piston_speed(mat.name, peak, J=v["J"], direction=v["direction"],
-                                                     rc=v["rc"], hugoniot=hug)["u"]
-            info.update(source=f"CSV {v['drive_csv']}", u=u, duration=float(top.max()) if top.max() > 0 else None,
+            u = peak if not stress else piston_speed(mat.name, peak, J=v.J, direction=v.direction,
+                                                     rc=v.rc, hugoniot=hug)["u"]
+            info.update(source=f"CSV {v.drive_csv}", u=u, duration=float(top.max()) if top.max() > 0 else None,
                         pulse=pulse_end(hist), peak=peak)
         else:
-            if v["drive"] == "pressure":
-                P = v["pressure"]
-                s = piston_speed(mat.name, P, J=v["J"], direction=v["direction"], rc=v["rc"], hugoniot=hug)
+            if v.drive == "pressure":
+                P = v.pressure
+                s = piston_speed(mat.name, P, J=v.J, direction=v.direction, rc=v.rc, hugoniot=hug)
                 u = s["u"]
                 info.update(source=f"normal stress {P / units.GPa:g} GPa on a free base layer (particle velocity "
                                    f"{u / units.km_s:.4g} km/s from the CD Hugoniot, {s['hugoniot']['source']}, "
                                    f"J={s['hugoniot']['J']})", ordered_table=s["ordered"])
-                hist = flat_top(P, v["flat"], v["release"], rise=v["rise"], u_end=0.0)
+                hist = flat_top(P, v.flat, v.release, rise=v.rise, u_end=0.0)
             else:
-                if v["u"] is not None:
-                    u = v["u"]
+                if v.u is not None:
+                    u = v.u
                     info.update(source="piston speed given")
                 else:
-                    s = piston_speed(mat.name, v["pressure"], J=v["J"], direction=v["direction"], rc=v["rc"],
+                    s = piston_speed(mat.name, v.pressure, J=v.J, direction=v.direction, rc=v.rc,
                                      hugoniot=hug)
                     u = s["u"]
-                    info.update(source=f"piston sized for {v['pressure'] / units.GPa:g} GPa from the CD Hugoniot "
+                    info.update(source=f"piston sized for {v.pressure / units.GPa:g} GPa from the CD Hugoniot "
                                        f"({s['hugoniot']['source']}, J={s['hugoniot']['J']})",
                                 ordered_table=s["ordered"])
-                hist = flat_top(u, v["flat"], v["release"], rise=v["rise"], u_end=v["u_end"])
-            info.update(u=u, duration=None if v["flat"] is None else v["rise"] + v["flat"],
-                        pulse=None if v["flat"] is None else v["rise"] + v["flat"] + v["release"])
+                hist = flat_top(u, v.flat, v.release, rise=v.rise, u_end=v.u_end)
+            info.update(u=u, duration=None if v.flat is None else v.rise + v.flat,
+                        pulse=None if v.flat is None else v.rise + v.flat + v.release)
         u = info["u"]
         info["D_table"] = float(Du(u)) if Du is not None else lattice_sound_speed(mat.c0) + 1.3 * u
         info["P_table"] = float(Pu(u)) if Pu is not None else math.nan
@@ -256,27 +256,27 @@ class ProfiledShockScene(SceneDef):
         prof, A, lam, width, r0, depth = self.geometry(v)
         if depth is None:
             return None
-        return fcc_count(width * (depth + A) * v["slab_cells"] * repeat_lengths(_dir_key(v), r0)[2], r0)
+        return fcc_count(width * (depth + A) * v.slab_cells * repeat_lengths(_dir_key(v), r0)[2], r0)
 
     def check(self, v):
-        mat = get_material(v["material"])
+        mat = get_material(v.material)
         if mat.curve is None:
-            raise InputError("material", v["material"], "a material with a cold curve: " + ", ".join(CD_MATERIALS))
+            raise InputError("material", v.material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
         prof, A, lam, width, r0, depth = self.geometry(v)
         rep = repeat_lengths(_dir_key(v), r0)
-        if v["slab_cells"] * rep[2] < 2 * v["rc"] * r0:
-            n = int(math.ceil(2 * v["rc"] * r0 / rep[2]))
-            raise InputError("slab_cells", v["slab_cells"], f">= {n} (the periodic slab must be at least 2 rc r0 "
+        if v.slab_cells * rep[2] < 2 * v.rc * r0:
+            n = int(math.ceil(2 * v.rc * r0 / rep[2]))
+            raise InputError("slab_cells", v.slab_cells, f">= {n} (the periodic slab must be at least 2 rc r0 "
                              "thick so that no cluster meets its own image)")
-        if depth is None and v["drive_csv"] is None and v["flat"] is None:
+        if depth is None and v.drive_csv is None and v.flat is None:
             raise InputError("depth", None, "a depth (a drive that holds its plateau for the whole run sets none)")
-        if v["drive"] == "pressure" and v["u"] is not None:
-            raise InputError("u", v["u"] / units.km_s, "none with drive=pressure (the stress is 'pressure')")
-        if v["u_end"] > (v["u"] if v["u"] is not None else math.inf):
-            raise InputError("u_end", v["u_end"] / units.km_s, "a speed <= u")
-        if v.get("spectrum_time") is not None and v["spectrum_time"] > v["t_end"] * (1 + 1e-9):
-            raise InputError("spectrum_time", f"{v['spectrum_time'] / units.us:g}us",
-                             f"none or a time within the run, 0-{v['t_end'] / units.us:g} us (t_end)")
+        if v.drive == "pressure" and v.u is not None:
+            raise InputError("u", v.u / units.km_s, "none with drive=pressure (the stress is 'pressure')")
+        if v.u_end > (v.u if v.u is not None else math.inf):
+            raise InputError("u_end", v.u_end / units.km_s, "a speed <= u")
+        if v.get("spectrum_time") is not None and v.spectrum_time > v.t_end * (1 + 1e-9):
+            raise InputError("spectrum_time", f"{v.spectrum_time / units.us:g}us",
+                             f"none or a time within the run, 0-{v.t_end / units.us:g} us (t_end)")
         if depth is not None and depth < A + 10 * r0:
             raise InputError("depth", f"{depth / units.um:g}um", f">= the profile's amplitude + 10 r0 = "
                              f"{(A + 10 * r0) / units.um:g} um")
@@ -285,12 +285,12 @@ class ProfiledShockScene(SceneDef):
                              "needs a few clusters per wavelength)")
 
     def setup(self, v, stage):
-        mat = get_material(v["material"])
+        mat = get_material(v.material)
         prof, A, lam, width, r0, depth = self.geometry(v)
         hist, dinfo = self.drive(v, r0)
         u = dinfo["u"]
         D = dinfo["D_table"]
-        ax = parse_axis(v["axis"])
+        ax = parse_axis(v.axis)
         if depth is None:
             dur = dinfo["duration"]
             if dur is None or not dur > 0:
@@ -301,25 +301,25 @@ class ProfiledShockScene(SceneDef):
         depth = max(depth, A + 10 * r0)
         if prof is None:
             atoms = flat_sample(mat, r0, depth=depth, width=width, axis=ax, direction=_dir_key(v),
-                                slab_cells=v["slab_cells"])
+                                slab_cells=v.slab_cells)
         else:
             atoms = profiled_sample(mat, r0, prof, depth=depth, width=width, axis=ax, direction=_dir_key(v), dims=2,
-                                    slab_cells=v["slab_cells"])
-        calc = ClusterDynamics(rc=v["rc"])
+                                    slab_cells=v.slab_cells)
+        calc = ClusterDynamics(rc=v.rc)
         atoms.calc = calc
         calc.setup(atoms)
         mask = piston_layer(atoms, piston_thickness(r0), ax)
         e = np.zeros(3)
         e[ax] = 1.0
-        if v["drive"] == "pressure":
+        if v.drive == "pressure":
             piston = Traction(mask, -e, hist)
         else:
             piston = Piston(mask, hist, direction=e)
-        thermal_noise(atoms, v["noise"], v["seed"], exclude=mask)
+        thermal_noise(atoms, v.noise, v.seed, exclude=mask)
         atoms.set_constraint(piston)
         atoms.set_momenta(atoms.get_momenta())
-        dt = shock_timestep(calc, u, v["dt_factor"])
-        dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+        dt = shock_timestep(calc, u, v.dt_factor)
+        dyn = DampedVerlet(atoms, timestep=dt, J=v.J)
         x = atoms.positions[:, ax]
         p = atoms.info["profile"]
         iu = (ax + 1) % 3
@@ -328,7 +328,7 @@ class ProfiledShockScene(SceneDef):
         nb, bw, off, W = _bins(atoms, p, ax, iu)
         h0 = surface_profile(atoms.positions, np.ones(len(atoms), bool), ax, iu, nb, bw, off, W)
         slab = max(float(repeat_lengths(_dir_key(v), r0)[0]), r0)
-        info = {"piston": np.flatnonzero(mask), "nsteps": int(math.ceil(v["t_end"] / dt)), "u": u,
+        info = {"piston": np.flatnonzero(mask), "nsteps": int(math.ceil(v.t_end / dt)), "u": u,
                 "D_table": D, "P_table": dinfo["P_table"], "drive_source": dinfo["source"],
                 "depth_rule": dinfo.get("depth_rule", "given"), "depth": float(depth), "r0": float(r0),
                 "amplitude": float(A), "wavelength": -1.0 if lam is None else float(lam),
@@ -349,19 +349,19 @@ class ProfiledShockScene(SceneDef):
         r0 = float(info["r0"])
         nsteps = int(info["nsteps"])
         dt = dyn.dt
-        every = max(1, int(round(nsteps / max(1, v["frames"]))))
+        every = max(1, int(round(nsteps / max(1, v.frames))))
         lam = None if info["wavelength"] < 0 else float(info["wavelength"])
         rec = EjectaRecorder(atoms, axis=ax, r0=r0, exclude=mask, u_drive=float(info["u"]), wavelength=lam,
                              snapshot_times=self.snapshot_times(v), spectrum_time=self.spectrum_time(v),
-                             half_frame=0.5 * every * dt, g_small=G_MAX, g_tip=int(v["g_tip"]),
-                             margin=float(v["margin"]), fs_layer=float(v["fs_layer"]),
+                             half_frame=0.5 * every * dt, g_small=G_MAX, g_tip=int(v.g_tip),
+                             margin=float(v.margin), fs_layer=float(v.fs_layer),
                              breakout_fraction=BREAKOUT_FRACTION)
         probe = ShockProbe(atoms, axis=ax, r0=r0, slab=float(info["slab"]), u_drive=float(info["u"]),
                            lo=float(info["base"]), hi=float(info["valley0"]), exclude=mask)
         ana = _Analysis(rec, probe)
         calc = atoms.calc
         transit = (float(info["valley0"]) - float(info["base"])) / float(info["D_table"])
-        pevery = max(1, int(transit / dt / max(1, v["probes"])))
+        pevery = max(1, int(transit / dt / max(1, v.probes)))
 
         def probe_obs():
             if not probe.done:
@@ -370,7 +370,7 @@ class ProfiledShockScene(SceneDef):
         def frame(d):
             rec.add(d.get_time(), atoms)
 
-        st = Stage(stage, atoms, dyn, nsteps, v["frames"], info, on_frame=frame, analysis=ana,
+        st = Stage(stage, atoms, dyn, nsteps, v.frames, info, on_frame=frame, analysis=ana,
                    observers=[(probe_obs, pevery)], observables={})
         return st
 
@@ -401,7 +401,7 @@ class ProfiledShockScene(SceneDef):
         info = sm["info"]
         pr = probe.result()
         q = {}
-        target = None if (v["u"] is not None or v["drive_csv"] is not None) else v["pressure"] / units.GPa
+        target = None if (v.u is not None or v.drive_csv is not None) else v.pressure / units.GPa
         q["P"] = Quantity(pr["P"] / units.GPa, "GPa", target, spread=pr["P_spread"] / units.GPa,
                           note="pressure delivered: -sigma along the axis on the plateau behind the front "
                                "(slabs within 10% of the peak velocity) before breakout, vs the target")
@@ -429,13 +429,13 @@ class ProfiledShockScene(SceneDef):
         n, nsteps, t_run = sm["n"], sm["nsteps"], sm["t_run"]
         o = info["orientation"]
         notes = [f"quasi-2D slab: surface normal {o['normal']} along {'xyz'[int(info['axis'])]}, periodic width "
-                 f"along {o['u']}, slab {v['slab_cells']} lattice repeats along {o['v']} (periodic)",
+                 f"along {o['u']}, slab {v.slab_cells} lattice repeats along {o['v']} (periodic)",
                  f"drive: {info['drive_source']}; plateau {info['u'] / units.km_s:.4g} km/s"
-                 + (f", pulse {info['pulse'] / units.us:g} us (rise {v['rise'] / units.us:g}, plateau "
-                    f"{(info['duration'] - v['rise']) / units.us:g}, release {v['release'] / units.us:g} us to "
-                    + (f"{v['u_end'] / units.km_s:g} km/s)" if v["drive"] == "piston" else "zero stress)")
-                    if info["pulse"] > 0 and v["drive_csv"] is None
-                    else ", from the CSV" if v["drive_csv"] is not None else ", held") +
+                 + (f", pulse {info['pulse'] / units.us:g} us (rise {v.rise / units.us:g}, plateau "
+                    f"{(info['duration'] - v.rise) / units.us:g}, release {v.release / units.us:g} us to "
+                    + (f"{v.u_end / units.km_s:g} km/s)" if v.drive == "piston" else "zero stress)")
+                    if info["pulse"] > 0 and v.drive_csv is None
+                    else ", from the CSV" if v.drive_csv is not None else ", held") +
                  f"; depth {info['depth'] / units.um:.1f} um ({info['depth_rule']})",
                  f"pressure delivered {pr['P'] / units.GPa:.2f} +- {pr['P_spread'] / units.GPa:.2f} GPa over "
                  f"{pr['n']} samples before breakout; the CD Hugoniot table gives "
@@ -443,7 +443,7 @@ class ProfiledShockScene(SceneDef):
                  "regime: " + self.regime(pr["ordered"]),
                  f"{n} clusters, r0 = {info['r0'] / units.um:g} um, {nsteps} steps of {sm['dt'] / units.ns:.4g} ns, "
                  f"{n * nsteps / max(t_run, 1e-9):.3g} particle-steps/s, stepping {t_run:.0f} s",
-                 "damping: " + ("off" if v["J"] is None else f"J = {v['J']:g} (Gamma = c0/(J r0))")]
+                 "damping: " + ("off" if v.J is None else f"J = {v.J:g} (Gamma = c0/(J r0))")]
         return notes
 
     @staticmethod
@@ -591,47 +591,47 @@ class EjectaScene(ProfiledShockScene):
     params = scene_params(EJECTA_PARAMS, h5md_frames=15)
 
     def geometry(self, v):
-        rz_c, lam_c, nper_c, r0_c = CASES[v["case"]]
-        rz = v["rz"] if v["rz"] is not None else rz_c
-        lam = v["wavelength"] if v["wavelength"] is not None else lam_c
-        nper = v["n_periods"] if v["n_periods"] is not None else nper_c
-        r0 = v["r0"] if v["r0"] is not None else r0_c
+        rz_c, lam_c, nper_c, r0_c = CASES[v.case]
+        rz = v.rz if v.rz is not None else rz_c
+        lam = v.wavelength if v.wavelength is not None else lam_c
+        nper = v.n_periods if v.n_periods is not None else nper_c
+        r0 = v.r0 if v.r0 is not None else r0_c
         width = nper * lam
-        kind = v["profile"]
+        kind = v.profile
         if kind == "sinusoid":
             prof, A = Sinusoid(0.5 * rz, lam), 0.5 * rz
         elif kind == "grooves":
             prof, A = Grooves(rz, lam), 0.5 * rz
         elif kind == "random":
-            prof, A = RandomRoughness(rz, 0.25 * lam, seed=v["seed"]), 0.5 * rz
+            prof, A = RandomRoughness(rz, 0.25 * lam, seed=v.seed), 0.5 * rz
         else:
             prof, A = None, 0.0
-        return prof, A, (lam if kind in ("sinusoid", "grooves") else None), width, r0, v["depth"]
+        return prof, A, (lam if kind in ("sinusoid", "grooves") else None), width, r0, v.depth
 
     #: most velocity snapshots a run may take (each holds every cluster's velocity)
     MAX_SNAPSHOTS = 1000
 
     def check(self, v):
         super().check(v)
-        if v["t_end"] / v["snapshot_every"] > self.MAX_SNAPSHOTS:
-            raise InputError("snapshot_every", f"{v['snapshot_every'] / units.us:g}us", f">= t_end / "
-                             f"{self.MAX_SNAPSHOTS} = {v['t_end'] / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
-                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v['t_end'] / units.us:g} us)")
-        if v["profile"] == "random":
-            lam = v["wavelength"] if v["wavelength"] is not None else CASES[v["case"]][1]
-            r0 = v["r0"] if v["r0"] is not None else CASES[v["case"]][3]
+        if v.t_end / v.snapshot_every > self.MAX_SNAPSHOTS:
+            raise InputError("snapshot_every", f"{v.snapshot_every / units.us:g}us", f">= t_end / "
+                             f"{self.MAX_SNAPSHOTS} = {v.t_end / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
+                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v.t_end / units.us:g} us)")
+        if v.profile == "random":
+            lam = v.wavelength if v.wavelength is not None else CASES[v.case][1]
+            r0 = v.r0 if v.r0 is not None else CASES[v.case][3]
             if 0.25 * lam < r0:
                 raise InputError("wavelength", lam / units.um, f">= 4 r0 = {4 * r0 / units.um:g} um (random: the "
                                  "correlation length wavelength/4 must be >= r0)")
 
     def snapshot_times(self, v):
-        k = int(math.floor(v["t_end"] / v["snapshot_every"] + 1e-9))
-        return [i * v["snapshot_every"] for i in range(k + 1)]
+        k = int(math.floor(v.t_end / v.snapshot_every + 1e-9))
+        return [i * v.snapshot_every for i in range(k + 1)]
 
     def spectrum_time(self, v):
-        if v["spectrum_time"] is None or v["spectrum_time"] > v["t_end"]:
-            return v["t_end"]
-        return v["spectrum_time"]
+        if v.spectrum_time is None or v.spectrum_time > v.t_end:
+            return v.t_end
+        return v.spectrum_time
 
     def analyse(self, v, summaries):
         sm = summaries[0]
@@ -650,11 +650,11 @@ class EjectaScene(ProfiledShockScene):
         q["u_fs_max"] = Quantity(float(np.nanmax(ufs)) / units.km_s, "km/s",
                                  note="largest free-surface velocity (layer below the valley front)")
         q["v_tip_max"] = Quantity(float(np.nanmax(vtip)) / units.km_s, "km/s",
-                                  note=f"largest jet-tip velocity (fragments of >= {v['g_tip']} clusters)")
+                                  note=f"largest jet-tip velocity (fragments of >= {v.g_tip} clusters)")
         q["v_tip"] = Quantity(float(vtip[ks]) / units.km_s, "km/s", note=f"jet-tip velocity at {ts / units.us:.2f} us")
         q["ejected_mass"] = Quantity(float(mej[ks]) / MG_CM2 if moving[ks] else math.nan, "mg/cm2",
                                      note=f"per unit area at {ts / units.us:.2f} us: mass ahead of the valley "
-                                          f"front faster than {v['margin']:g} u_fs")
+                                          f"front faster than {v.margin:g} u_fs")
         q["ejected_mass_max"] = Quantity(float(np.nanmax(mej)) / MG_CM2 if moving.any() else math.nan, "mg/cm2",
                                          note="largest over the run")
         q["jet_length"] = Quantity(float(xtip[-1] - xb[-1]) / units.um, "um",
@@ -673,7 +673,7 @@ class EjectaScene(ProfiledShockScene):
                                            "spectrum time (not full-width layers)")
         q["mean_diameter"] = Quantity(float(d.mean()) / units.um if len(d) else math.nan, "um",
                                       note="mean equivalent diameter of those fragments")
-        if v["corrections"] and len(d):
+        if v.corrections and len(d):
             dc = spectrum_table(g, d, drop_below=PAPER_DROP, shift=PAPER_SHIFT)["diameter"]
             q["n_corrected"] = Quantity(float(len(dc)), "", note="fragments left after the paper's first "
                                         "correction (no particles under 10 um)")
@@ -713,9 +713,9 @@ class EjectaScene(ProfiledShockScene):
                      f"of the valley front at the end; spall: the main body has lost the material above "
                      f"{SPALL_MIN:g} r0 below the initial surface across the whole width; {len(layers)} "
                      "full-width layers at the end)")
-        notes.append(f"ejecta: mass ahead of the valley front moving faster than {v['margin']:g} u_fs, u_fs the "
-                     f"mean velocity of the body's {v['fs_layer']:g} r0 layer below the valley front; jet tip: "
-                     f"foremost cluster of fragments with >= {v['g_tip']} clusters")
+        notes.append(f"ejecta: mass ahead of the valley front moving faster than {v.margin:g} u_fs, u_fs the "
+                     f"mean velocity of the body's {v.fs_layer:g} r0 layer below the valley front; jet tip: "
+                     f"foremost cluster of fragments with >= {v.g_tip} clusters")
         n_paper = (500 * units.um * 2.4 * units.mm) / PAPER_R0 ** 2
         notes.append(f"reach: the paper's 0.5 um clusters on 500 um x 2.4 mm are about {n_paper:.1e} clusters per "
                      f"plane and, in 3D or over 7 us, about 1e13 particle-steps; this run took "
@@ -733,14 +733,14 @@ class EjectaScene(ProfiledShockScene):
         sm = summaries[0]
         info = sm["info"]
         rec, probe = self.restore(sm)
-        jtxt = "off" if v["J"] is None else f"{v['J']:g}"
+        jtxt = "off" if v.J is None else f"{v.J:g}"
         title = (f"{info['profile_kind']} Rz {2 * info['amplitude'] / units.um:g} um, lambda "
                  f"{info['wavelength'] / units.um:g} um, {result.quantities['P'].value:.1f} GPa, r0 "
                  f"{info['r0'] / units.um:g} um, J = {jtxt}")
         files = [self.write_summary(out, summaries, "ejecta")]
         files += self.history_png(out, rec, info, title, "ejecta")
         files += self.snapshots_png(out, rec, info, title, "ejecta")
-        files += self.spectrum_png(out, rec, info, title, v["corrections"])
+        files += self.spectrum_png(out, rec, info, title, v.corrections)
         return files
 
     def spectrum_png(self, out, rec, info, title, corrections):

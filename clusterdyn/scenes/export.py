@@ -20,6 +20,7 @@ sub-folders named after the stages.  MCA scenes have no LAMMPS form and are
 refused.
 """
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,7 @@ NOT_IN_DECK = {
 
 
 def _jsonable(v):
-    if isinstance(v, dict):
+    if isinstance(v, Mapping):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
         return [_jsonable(x) for x in v]
@@ -103,28 +104,27 @@ def export_scene(scene_name, overrides, out_dir, **kw):
     refuse_law_on_lammps(v)
     out = check_out(out_dir)
     stages = scene.plan(v)
-    built = []
-    for name in stages:                         # build (and refuse) every stage before writing any deck
-        atoms, dyn, info = scene.setup(v, name)
-        built.append((name, atoms, dyn, info))
-    for name, atoms, dyn, info in built:
-        check_deck(atoms, atoms.calc, dyn)      # what the deck cannot carry is refused here
+    built = [scene.build_stage(v, name) for name in stages]   # build (and refuse) every stage before any deck
+    for st in built:
+        check_deck(st.atoms, st.atoms.calc, st.dyn)   # what the deck cannot carry is refused here
     folders = []
-    for name, atoms, dyn, info in built:
+    for st in built:
+        name, atoms, dyn, info = st.name, st.atoms, st.dyn, st.info
         folder = out if len(stages) == 1 else out / name
         extra = {"scene": scene.name, "stage": name, "params": scene.display(v), "not_in_deck": skipped,
                  "stage_info": _jsonable(info)}
-        if "piston" in info:                    # a piston shock: what shock_from_lammps needs
+        piston = info.get("piston_index", info.get("piston"))
+        if piston is not None:                  # a piston shock: what shock_from_lammps needs
             ax = int(info["axis"])
             mask = np.zeros(len(atoms), bool)
-            mask[np.asarray(info["piston"], dtype=np.int64)] = True
+            mask[np.asarray(piston, dtype=np.int64)] = True
             extra.update({"rho0_ase": float(info["rho0"]), "u_ase": float(info["u"]), "slab_A": float(info["slab"]),
                           "length_A": float(info["length"]), "axis": ax,
                           "piston_mask_ids": (np.nonzero(mask)[0] + 1).tolist(),
                           "x0_lo_A": float(atoms.positions[~mask, ax].min())})
         kwargs = dict(kw)
         nsteps = kwargs.pop("nsteps", int(info["nsteps"]))
-        frames = kwargs.pop("frames", v["frames"])
+        frames = kwargs.pop("frames", v.frames)
         folders.append(Path(export_lammps(atoms, atoms.calc, dyn, folder, nsteps=nsteps, frames=frames,
                                           extra=extra, **kwargs)))
     return folders

@@ -109,25 +109,25 @@ PARAMS = [
 
 def build_hypervelocity(v):
     """Plate and sphere, calculator and dynamics; returns ``(atoms, dyn, info)``."""
-    r0, V, ax = v["r0"], v["V"], parse_axis(v["axis"])
-    t, R, D = v["thickness"], v["radius"], v["diameter"]
+    r0, V, ax = v.r0, v.V, parse_axis(v.axis)
+    t, R, D = v.thickness, v.radius, v.diameter
     e = np.eye(3)[ax]
-    pl = plate(v["plate_material"], r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), orientation="100")
-    rot = Rotation.random(random_state=v["seed"]).as_matrix()
-    sp = sphere(v["sphere_material"], r0, D, center=(0.0, 0.0, 0.0), velocity=-V * e, axis=ax, orientation=rot)
+    pl = plate(v.plate_material, r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), orientation="100")
+    rot = Rotation.random(random_state=v.seed).as_matrix()
+    sp = sphere(v.sphere_material, r0, D, center=(0.0, 0.0, 0.0), velocity=-V * e, axis=ax, orientation=rot)
     sp = place(sp, pl, axis=ax, gap=START_GAP * r0, side=1, align=True)
     atoms = combine_bodies([pl, sp])
-    calc = ClusterDynamics(rc=v["rc"])
+    calc = ClusterDynamics(rc=v.rc)
     atoms.calc = calc
-    thermal_noise(atoms, v["noise"], v["seed"])
+    thermal_noise(atoms, v.noise, v.seed)
     calc.setup(atoms)
     c0 = max(p.c0 for p in calc.potentials)
-    dt = v["dt_factor"] * r0 / (c0 + V)
+    dt = v.dt_factor * r0 / (c0 + V)
     region = None
     if v.get("keep_within") is not None:
-        half = float(v["keep_within"])
+        half = float(v.keep_within)
         region = RegionOfInterest(lo=[-half] * 3, hi=[half] * 3)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"], region=region)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v.J, region=region)
     dyn.start_ledger()
     body = atoms.arrays["body"]
     z = atoms.positions[:, ax]
@@ -135,7 +135,7 @@ def build_hypervelocity(v):
     z_front, z_rear = float(zp.max() + 0.5 * r0), float(zp.min() - 0.5 * r0)
     gap = float(z[body == 1].min() - 0.5 * r0 - z_front)
     t_contact = max(0.0, gap) / V
-    nsteps = int(math.ceil((v["t_end"] + t_contact) / dt))
+    nsteps = int(math.ceil((v.t_end + t_contact) / dt))
     announce_cost("hypervelocity", len(atoms), nsteps)
     info = {"r0": r0, "V": V, "axis": ax, "dt": dt, "nsteps": nsteps, "t_contact": t_contact,
             "z_front": z_front, "z_rear": z_rear, "z_mid": 0.5 * (z_front + z_rear), "thickness": t, "radius": R,
@@ -241,34 +241,34 @@ class HypervelocityScene(SceneDef):
 
     def estimate_particles(self, v):
         from .lifecycle import fcc_count
-        return fcc_count(math.pi * v["radius"] ** 2 * v["thickness"] + math.pi / 6 * v["diameter"] ** 3, v["r0"])
+        return fcc_count(math.pi * v.radius ** 2 * v.thickness + math.pi / 6 * v.diameter ** 3, v.r0)
 
     def check(self, v):
-        if v["thickness"] < v["r0"]:
-            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the plate thickness "
-                             f"{v['thickness'] / units.mm:g} mm")
-        if v["diameter"] < 2 * v["r0"]:
-            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", "at most half the sphere diameter")
-        if v["radius"] < v["diameter"]:
-            raise InputError("radius", f"{v['radius'] / units.mm:g}mm", f"at least the sphere diameter "
-                             f"{v['diameter'] / units.mm:g} mm (the hole must not reach the edge)")
-        if v["keep_within"] is not None:
-            need = max(v["radius"], v["diameter"] + v["thickness"]) + 2 * v["r0"]
-            if v["keep_within"] < need:
-                raise InputError("keep_within", f"{v['keep_within'] / units.mm:g}mm", f"at least "
+        if v.thickness < v.r0:
+            raise InputError("r0", f"{v.r0 / units.mm:g}mm", f"at most the plate thickness "
+                             f"{v.thickness / units.mm:g} mm")
+        if v.diameter < 2 * v.r0:
+            raise InputError("r0", f"{v.r0 / units.mm:g}mm", "at most half the sphere diameter")
+        if v.radius < v.diameter:
+            raise InputError("radius", f"{v.radius / units.mm:g}mm", f"at least the sphere diameter "
+                             f"{v.diameter / units.mm:g} mm (the hole must not reach the edge)")
+        if v.keep_within is not None:
+            need = max(v.radius, v.diameter + v.thickness) + 2 * v.r0
+            if v.keep_within < need:
+                raise InputError("keep_within", f"{v.keep_within / units.mm:g}mm", f"at least "
                                  f"{need / units.mm:g} mm (the plate radius or the sphere's start, plus 2 r0: "
                                  "the region must hold the set-up)")
-        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
+        late = [t for t in parse_times(v.image_times, "image_times", []) if t > v.t_end * (1 + 1e-9)]
         if late:
-            raise InputError("image_times", v["image_times"], f"auto or times within the run, 0-"
-                             f"{v['t_end'] / units.us:g} us (t_end)")
+            raise InputError("image_times", v.image_times, f"auto or times within the run, 0-"
+                             f"{v.t_end / units.us:g} us (t_end)")
 
     def setup(self, v, stage):
         return build_hypervelocity(v)
 
     def attach(self, v, stage, atoms, dyn, info):
-        te = v["t_end"]
-        times = parse_times(v["image_times"], "image_times", [0.25 * te, 0.5 * te, 0.75 * te, te])
+        te = v.t_end
+        times = parse_times(v.image_times, "image_times", [0.25 * te, 0.5 * te, 0.75 * te, te])
         rec = HyperRecord(atoms, dyn, info, [t for t in times if t <= te + 1e-9 * te])
         nframes = max(1, int(round(info["nsteps"] * info["dt"] / FRAME_TIME)))
         return Stage(stage, atoms, dyn, int(info["nsteps"]), nframes, info, on_frame=rec.frame, analysis=rec)
@@ -350,7 +350,7 @@ class HypervelocityScene(SceneDef):
         notes.append("Table 2 (d mm, theta deg): experiment 17.3 / 20.67, the paper's SPH 18.0 / 27.08, its CD "
                      "17 / 39; plate thickness 1.6 mm inferred from the hole-size law")
         notes.append(lnote)
-        for r in v.get("_retried", []):
+        for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         extra = {"history": {k: [r[k] for r in rows] for k in rows[0]}, "ledger_J": sm["ledger"],
                  "n_clusters": sm["n"], "steps": sm["steps"], "stepping_time_s": sm["t_run"]}

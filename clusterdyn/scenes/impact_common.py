@@ -158,7 +158,7 @@ def retry_halved_dt(v, exc, attempt, key="dt_factor", retries_key="dt_retries"):
         return None
     note = (f"dt factor {v[key]:g}: stopped at step {exc.step} ({exc.quantity} {exc.value:.4g} > limit "
             f"{exc.limit:.4g})")
-    return {**v, key: 0.5 * v[key], "_retried": list(v.get("_retried", [])) + [note]}
+    return v.replace(**{key: 0.5 * v[key]}, retried=v.retried + (note,))
 
 
 def parse_times(text, name, default):

@@ -80,20 +80,20 @@ class JetsScene(ProfiledShockScene):
     params = scene_params(JETS_PARAMS, h5md_frames=15)
 
     def geometry(self, v):
-        A, lam = v["amplitude"], v["wavelength"]
-        return Sinusoid(A, lam), A, lam, v["n_periods"] * lam, v["r0"], v["depth"]
+        A, lam = v.amplitude, v.wavelength
+        return Sinusoid(A, lam), A, lam, v.n_periods * lam, v.r0, v.depth
 
     def check(self, v):
         super().check(v)
-        if v["jet_window"] is not None and v["jet_window"] >= v["t_end"]:
-            raise InputError("jet_window", f"{v['jet_window'] / units.us:g}us", f"none or a start before the end "
-                             f"of the run, t_end = {v['t_end'] / units.us:g} us")
-        if v["depth"] - v["amplitude"] < 10 * v["r0"]:
-            raise InputError("depth", v["depth"] / units.mm, f">= amplitude + 10 r0 = "
-                             f"{(v['amplitude'] + 10 * v['r0']) / units.mm:g} mm")
+        if v.jet_window is not None and v.jet_window >= v.t_end:
+            raise InputError("jet_window", f"{v.jet_window / units.us:g}us", f"none or a start before the end "
+                             f"of the run, t_end = {v.t_end / units.us:g} us")
+        if v.depth - v.amplitude < 10 * v.r0:
+            raise InputError("depth", v.depth / units.mm, f">= amplitude + 10 r0 = "
+                             f"{(v.amplitude + 10 * v.r0) / units.mm:g} mm")
 
     def snapshot_times(self, v):
-        return [k * v["t_end"] / 6 for k in range(7)]
+        return [k * v.t_end / 6 for k in range(7)]
 
     def analyse(self, v, summaries):
         sm = summaries[0]
@@ -116,7 +116,7 @@ class JetsScene(ProfiledShockScene):
                         f"the crests at {t_crest / units.us:.3f} us")
         after = t >= t_crest
         # jets: tip and free-surface velocities over the second half of the time after breakout
-        t_late = t_crest + 0.5 * (t_end - t_crest) if v["jet_window"] is None else v["jet_window"]
+        t_late = t_crest + 0.5 * (t_end - t_crest) if v.jet_window is None else v.jet_window
         v_jet, _, nj = fit_rate(t, xtip, t_late, t_end)
         late = t >= t_late
         u_fs = float(np.nanmean(ufs[late])) if late.any() else math.nan
@@ -188,7 +188,7 @@ class JetsScene(ProfiledShockScene):
                      + (f" at {t_inv / units.us:.4f} us ({(t_inv - t_start) * k * u_w:.2f} inversion times "
                         f"1/(k u_fs) after the impulse)" if inverted else f" by {t_end / units.us:.2f} us"))
         notes.append("jet tip: foremost cluster of fragments with >= "
-                     f"{v['g_tip']} clusters; u_fs: mean velocity of the body's {v['fs_layer']:g} r0 layer "
+                     f"{v.g_tip} clusters; u_fs: mean velocity of the body's {v.fs_layer:g} r0 layer "
                      "below the valley front")
         extra = {"regime": self.regime(pr["ordered"]), "k_eta0": k * A, "t_valley_us": t_valley / units.us,
                  "t_crest_us": t_crest / units.us, "inverted": inverted, "t_inversion_us": t_inv / units.us,
@@ -204,8 +204,8 @@ class JetsScene(ProfiledShockScene):
         sm = summaries[0]
         info = sm["info"]
         rec, _ = self.restore(sm)
-        jtxt = "off" if v["J"] is None else f"{v['J']:g}"
-        title = (f"{v['material']} sinusoid {info['amplitude'] / units.um:g} um / {info['wavelength'] / units.um:g} um, "
+        jtxt = "off" if v.J is None else f"{v.J:g}"
+        title = (f"{v.material} sinusoid {info['amplitude'] / units.um:g} um / {info['wavelength'] / units.um:g} um, "
                  f"{result.quantities['P'].value:.1f} GPa, r0 {info['r0'] / units.um:g} um, J = {jtxt}")
         files = [self.write_summary(out, summaries, "jets")]
         files += self.history_png(out, rec, info, title, "jets")

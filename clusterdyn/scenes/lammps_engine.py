@@ -118,8 +118,7 @@ def _stages(scene, v):
     """Every stage built and attached (refusals of the deck before any file)."""
     built = []
     for name in scene.plan(v):
-        atoms, dyn, info = scene.setup(v, name)
-        stage = scene.attach(v, name, atoms, dyn, info)
+        stage = scene.build_stage(v, name)
         check_deck(stage.atoms, stage.atoms.calc, stage.dyn, allow_region=True)
         built.append(stage)
     return built
@@ -366,8 +365,7 @@ def analyse_scene(scene_name, folder):
     scene.check(v)
     stages = []
     for name in scene.plan(v):
-        atoms, dyn, info = scene.setup(v, name)
-        stages.append(scene.attach(v, name, atoms, dyn, info))
+        stages.append(scene.build_stage(v, name))
     folders = _folders(out, stages)
     runs = [read_run(f) for f in folders]
     return _analyse(scene, v, stages, folders, runs, out, skipped)
@@ -382,7 +380,7 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
     for st, folder, run in zip(stages, folders, runs):
         files += replay(scene, v, st, run, folder, out, len(stages))
         summaries.append(scene.finish(v, st))
-    quantities, notes, extra = scene.analyse(v, summaries)
+    quantities, notes, extra, data = scene.analysed(v, summaries)
     notes = list(notes)
     for st, run in zip(stages, runs):
         notes.append(f"engine: LAMMPS on {run.nprocs} rank(s){'' if len(stages) == 1 else f' ({st.name})'}, "
@@ -406,7 +404,7 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
                                             "memory_mb_total": r.memory_mb_total, "timing": r.timing}
                                   for st, f, r in zip(stages, folders, runs)}}
     res = SceneResult(scene.name, quantities, 0.0, params=scene.display(v), notes=notes, extra=extra,
-                      files=[f for f in files if f])
+                      files=[f for f in files if f], data=data)
     scene.verdict(v, summaries, res)
     res.files += [Path(f) for f in scene.report(v, summaries, res, out) or []]
     res.wall_time_s = sum(r.wall_time_s for r in runs if r.wall_time_s == r.wall_time_s) + time.perf_counter() - t0

@@ -30,17 +30,17 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
+from .. import units
 from ..errors import DEFER_INTERRUPT, InputError, InstabilityError, OutputError, check_interrupt
+from .output import LOCKFILE, WRITE_MARGIN, _write_failure, _WriteWatch, check_out, lock_out, room_for  # noqa: F401
 
 #: checkpoint file name in the output folder
 CHECKPOINT = "checkpoint.h5"
-#: lock file in the output folder: one run writes a folder at a time
-LOCKFILE = ".clusterdyn.lock"
 #: the last checkpoint written in this process: {"path": str, "step": int}
 LAST_CHECKPOINT = {}
 
@@ -90,143 +90,71 @@ class Stage:
     t_run: float = 0.0
     per_particle: dict = None
     stop: object = None
+    setup: object = None
 
 
-def check_out(out):
-    """Refuse an output folder that cannot be written, before any work (returns a Path or None)."""
-    if out is None:
-        return None
-    p = Path(out)
-    if p.exists() and not p.is_dir():
-        raise InputError("--out", str(out), "a folder (this path is a file)")
-    probe = p
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise InputError("--out", str(out), f"a folder path ({probe} is a file)")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise InputError("--out", str(out), f"a folder you may write to (no write permission in {probe})")
-    return p
+#: metadata of a :class:`Setup` field that holds a live object (not written to a checkpoint)
+LIVE = {"live": True}
 
 
-_HELD = {}          # real path of a locked folder -> [fd, depth]
+@dataclass
+class Setup:
+    """What a scene's :meth:`SceneDef.setup` builds for a stage: the sample and its dynamics (live
+    objects), and the encodable set-up facts the stage's analysis needs (index arrays, lengths,
+    speeds), one field each.
 
-
-@contextlib.contextmanager
-def lock_out(out):
-    """Hold the output folder ``out`` for this process (created if needed) while the block runs.
-
-    An exclusive ``fcntl.flock`` on ``out/.clusterdyn.lock``: a second run (another
-    process) writing the same folder is refused in one line (InputError) before it
-    touches any file there, so the first run's files are never damaged.  Re-entrant
-    within one process (a CLI run that locked the folder, then the scene).  The lock
-    goes with the process: a killed run leaves no stale lock.
+    A subclass adds its fields; a field with ``metadata=LIVE`` holds a live object and is left out
+    of :meth:`state`.  :meth:`state` is the checkpoint's payload for the stage, and
+    :meth:`restore` builds the same set-up around the particles and dynamics a checkpoint gives back
+    (nothing is computed again).
     """
-    if out is None:
-        yield None
-        return
-    import fcntl
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    key = os.path.realpath(out)
-    if key in _HELD:
-        _HELD[key][1] += 1
-        try:
-            yield out
-        finally:
-            _HELD[key][1] -= 1
-        return
-    path = out / LOCKFILE
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        try:
-            who = os.pread(fd, 64, 0).decode(errors="replace").split()
-        except OSError:
-            who = []
-        os.close(fd)
-        raise InputError("--out", str(out), "a folder no other clusterdyn run is writing",
-                         hint=f"run {'pid ' + who[0] if who else 'of another process'} holds {path}; "
-                              "wait for it to end or choose another --out") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    _HELD[key] = [fd, 1]
-    try:
-        yield out
-    finally:
-        _HELD[key][1] -= 1
-        if _HELD[key][1] == 0:
-            del _HELD[key]
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
+
+    atoms: object = field(repr=False, metadata=LIVE)
+    dyn: object = field(repr=False, metadata=LIVE)
+
+    def __getitem__(self, key):
+        """A field by name, so that analysis helpers read a set-up and its :meth:`state` (a summary's
+        or a checkpoint's dict) alike."""
+        if key in self.__dataclass_fields__:
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def state(self):
+        """The encodable fields as a dict (tuples as lists), for a checkpoint."""
+        return {f.name: _plain(getattr(self, f.name)) for f in fields(self) if not f.metadata.get("live")}
+
+    @classmethod
+    def restore(cls, atoms, dyn, state):
+        """The set-up of ``state`` (:meth:`state`, as a checkpoint gives it back) around ``atoms`` and ``dyn``."""
+        kw = {}
+        for f in fields(cls):
+            if f.metadata.get("live") or f.name not in state:
+                continue
+            x = state[f.name]
+            if isinstance(x, np.generic):
+                x = x.item()
+            if f.type in (tuple, "tuple") and isinstance(x, (list, np.ndarray)):
+                x = tuple(y.item() if isinstance(y, np.generic) else y for y in x)
+            kw[f.name] = x
+        return cls(atoms=atoms, dyn=dyn, **kw)
 
 
-class _WriteWatch:
-    """Catch the write failures h5py reports only as "Exception ignored" (a chunk written when a
-    dataset is released on a full disk): they are recorded here instead of printed, and
-    :meth:`check` raises :class:`~clusterdyn.errors.OutputError` for them."""
-
-    def __init__(self):
-        self.failures = []
-        self._prev = None
-
-    def __enter__(self):
-        self._prev = sys.unraisablehook
-        sys.unraisablehook = self._hook
-        return self
-
-    def __exit__(self, *exc):
-        sys.unraisablehook = self._prev
-
-    def _hook(self, u):
-        where = f"{u.object!r} {u.err_msg or ''} {u.exc_value}"
-        if isinstance(u.exc_value, (OSError, RuntimeError)) and ("h5py" in where or "file write failed" in where):
-            self.failures.append(u.exc_value)
-            return
-        self._prev(u)
-
-    def check(self, path, kept):
-        if self.failures:
-            exc = self.failures[0]
-            self.failures.clear()
-            raise OutputError(path, exc, kept)
+def _given_text(params, overrides):
+    """The overrides as the user wrote them, for refusals (a bare ASE number shown in the display unit too)."""
+    known = {p.name: p for p in params}
+    out = {}
+    for k, x in (overrides or {}).items():
+        p = known.get(k)
+        if p is not None and p.takes_ase_number(x):
+            out[k] = f"{float(x):g} (ASE units: {float(x) / units.NAMED[p.unit]:g} {p.unit})"
+        else:
+            out[k] = str(x)
+    return out
 
 
-#: room kept free beyond the estimated size of the next write (HDF5 metadata, allocation in blocks)
-WRITE_MARGIN = 1 << 18
-
-
-def room_for(path, need, kept=None, fresh=False):
-    """Raise :class:`~clusterdyn.errors.OutputError` (ENOSPC or EFBIG) unless ``need`` more bytes fit
-    in ``path`` (its file system's free space for us and the process's file-size limit), checked
-    *before* writing: HDF5 cannot always recover a file whose write failed half way, so a
-    run stops while its files are whole.  ``fresh``: the bytes go to a new file that replaces
-    ``path`` once complete (a checkpoint), so its present size does not count."""
-    import errno
-    import resource
-    path = Path(path)
-    folder = path.parent if not path.is_dir() else path
-    size = path.stat().st_size if (path.is_file() and not fresh) else 0     # fresh: a new file replaces it
-    try:
-        st = os.statvfs(folder)
-        free = st.f_bavail * st.f_frsize
-    except OSError:  # pragma: no cover - no statvfs
-        free = None
-    if free is not None and free < need + WRITE_MARGIN:
-        raise OutputError(path, OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)),
-                          (kept + "; " if kept else "") + f"{free / 2**20:.3g} MiB free, the next write needs "
-                          f"about {(need + WRITE_MARGIN) / 2**20:.3g} MiB")
-    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
-    if soft != resource.RLIM_INFINITY and size + need + WRITE_MARGIN > soft:
-        raise OutputError(path, OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
-                          (kept + "; " if kept else "") + f"the file-size limit is {soft / 2**20:.3g} MiB")
-
-
-def _write_failure(exc):
-    """An exception that means a file could not be written (not bad input, not physics)."""
-    from ase.calculators.calculator import CalculationFailed
-    return isinstance(exc, (OSError, RuntimeError)) and not isinstance(exc, (CalculationFailed, InputError))
+def _parse_value(p, x):
+    """One override: bare Python numbers of a parameter with a unit in ASE units, the rest as text."""
+    return p.parse_ase(x) if p.takes_ase_number(x) else p.parse(x)
 
 
 def _same(a, b):
@@ -263,6 +191,9 @@ class SceneDef:
     params = ()
     #: H5MD file name stem (default: the scene's name)
     h5md_stem = None
+    #: the :class:`Setup` subclass :meth:`setup` returns (None: a scene whose ``setup`` still returns
+    #: ``(atoms, dyn, info)`` and whose ``attach`` takes them)
+    setup_class = None
     #: what a user can change from the command line after an instability (formatted with the
     #: parameters; added to the message), e.g. the MCA scenes' ``steps``
     instability_hint = None
@@ -276,23 +207,55 @@ class SceneDef:
         return ["main"]
 
     def setup(self, v, stage):
-        """Build ``(atoms, dyn, info)`` of a stage: sample, calculator, drives, dynamics."""
+        """Build a stage: sample, calculator, drives, dynamics; a :attr:`setup_class` instance (or,
+        for a scene without one, ``(atoms, dyn, info)``)."""
         raise NotImplementedError
 
-    def attach(self, v, stage, atoms, dyn, info):
-        """The :class:`Stage` around a built or restored ``(atoms, dyn, info)``."""
+    def attach(self, v, stage, setup):
+        """The :class:`Stage` around a built or restored :class:`Setup` (a scene without a
+        :attr:`setup_class`: ``attach(v, stage, atoms, dyn, info)``)."""
         raise NotImplementedError
+
+    def build_stage(self, v, stage):
+        """:meth:`setup` then :meth:`attach`: the :class:`Stage` of a fresh run."""
+        built = self.setup(v, stage)
+        if isinstance(built, Setup):
+            return self._attached(v, stage, built)
+        atoms, dyn, info = built
+        return self.attach(v, stage, atoms, dyn, info)
+
+    def restore_stage(self, v, stage, atoms, dyn, info):
+        """The :class:`Stage` around particles and dynamics restored from a checkpoint whose stage
+        payload is ``info``."""
+        if self.setup_class is None:
+            return self.attach(v, stage, atoms, dyn, info)
+        return self._attached(v, stage, self.setup_class.restore(atoms, dyn, info))
+
+    def _attached(self, v, name, setup):
+        st = self.attach(v, name, setup)          # may change the set-up (a restart's longer run)
+        st.setup = setup
+        if not st.info:
+            st.info = setup.state()
+        return st
 
     def finish(self, v, stage):
         """Encodable summary of a finished stage (all that analysis and report need)."""
         raise NotImplementedError
 
     def analyse(self, v, summaries):
-        """``(quantities, notes, extra)`` from the stages' summaries."""
+        """``(quantities, notes, extra)`` from the stages' summaries, or ``(quantities, notes, extra,
+        data)``: ``data`` is what :meth:`report` needs of the analysis (fitted once here), held in
+        memory as ``result.data``."""
         raise NotImplementedError
 
+    def analysed(self, v, summaries):
+        """:meth:`analyse` as ``(quantities, notes, extra, data)`` (``data`` None when it keeps nothing)."""
+        out = tuple(self.analyse(v, summaries))
+        return out if len(out) == 4 else out + (None,)
+
     def report(self, v, summaries, result, out):
-        """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths."""
+        """Write the scene's PNGs and the CSVs behind them to ``out``; return the paths
+        (``result.data``: what :meth:`analyse` kept for it)."""
         return []
 
     def verdict(self, v, summaries, result):
@@ -303,19 +266,41 @@ class SceneDef:
         return None
 
     # -- the lifecycle -----------------------------------------------------------------
+    @property
+    def Values(self):
+        """The frozen dataclass of this scene's parameter values (:func:`~clusterdyn.scenes.base.values_class`)."""
+        cls = self.__dict__.get("_values_class")
+        if cls is None or cls._names != tuple(p.name for p in self.params):
+            from .base import values_class
+            cls = self.__dict__["_values_class"] = values_class(self.name or type(self).__name__, self.params)
+        return cls
+
     def defaults(self):
+        """The default values (a :attr:`Values`, ASE units)."""
+        return self.Values(**self._default_dict())
+
+    def _default_dict(self):
         return {p.name: (p.parse(p.default) if p.default is not None else None) for p in self.params}
 
     def parse(self, overrides):
-        """Defaults updated with ``overrides`` (text or values); unknown keys refused."""
+        """The parameter values (a :attr:`Values`, ASE units): the defaults updated with ``overrides``.
+
+        ``overrides`` maps parameter names to text or Python values.  Text is read as on the
+        command line: a number with a unit (``"5um"``, ``"3km/s"``), or a bare number in the
+        parameter's display unit (``clusterdyn list`` names it).  A bare Python number for a
+        parameter with a unit is in ASE units, as builders and calculators take it:
+        ``{"r0": 5 * units.um}`` is 5 um (its range is checked in the display unit).  Unknown keys
+        and values out of range are refused in one line (InputError).  Callers whose numbers are in
+        display units write them as text first (:func:`~clusterdyn.scenes.base.display_text`).
+        """
         known = {p.name: p for p in self.params}
-        vals = self.defaults()
-        self._given = {k: str(x) for k, x in (overrides or {}).items()}
+        vals = self._default_dict()
+        self._given = _given_text(self.params, overrides)
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
-            vals[k] = known[k].parse(x)
-        return vals
+            vals[k] = _parse_value(known[k], x)
+        return self.Values(**vals)
 
     def given(self, p, value):
         """A parameter's value as the user wrote it (for a refusal), else in its display unit."""
@@ -340,18 +325,18 @@ class SceneDef:
             else:
                 vals[p.name] = p.parse(p.default) if p.default is not None else None
         allowed = self.restart_keys()
-        self._given = {k: str(x) for k, x in (overrides or {}).items()}
+        self._given = _given_text(self.params, overrides)
         for k, x in (overrides or {}).items():
             if k not in known:
                 raise InputError("--set", k, f"a parameter of scene '{self.name}': " + ", ".join(known))
-            new = known[k].parse(x)
+            new = _parse_value(known[k], x)
             if k not in allowed and not _same(new, vals[k]):
                 raise InputError("--set", f"{k}={x}",
                                  "on --restart only keys a continuation can change: "
                                  + (", ".join(allowed) or "none"),
                                  hint=f"the checkpoint ran with {k}={_display(known[k], vals[k])}")
             vals[k] = new
-        return vals
+        return self.Values(**vals)
 
     def run(self, overrides=None, out=None, progress=True, restart=None):
         """Run the scene; returns its :class:`~clusterdyn.scenes.base.SceneResult`.
@@ -447,7 +432,7 @@ class SceneDef:
         """Refuse more analysis or H5MD frames than the run has steps (they would be silently fewer).
 
         A default (not given) larger than a short run is lowered to the run's steps, and
-        ``result.json`` records the number used."""
+        ``result.json`` records the number used.  Returns the values (changed where lowered)."""
         n = int(stage.nsteps)
         for key in ("frames", "h5md_frames"):
             want = v.get(key)
@@ -455,11 +440,12 @@ class SceneDef:
                 continue
             if int(want) > n:
                 if key not in getattr(self, "_given", {}):
-                    v[key] = n
+                    v = v.replace(**{key: n})
                     if key == "frames":
                         stage.frames = n
                     continue
                 raise InputError(key, self.given(key, want), f"at most the run's {n} steps (one frame per step)")
+        return v
 
     #: parameters that set the size of a cluster or automaton, and the range the model is checked in
     size_params = ("r0", "d", "r0_inclusion")
@@ -501,20 +487,19 @@ class SceneDef:
                     if resume is not None and resume.get("stage_index") == k:
                         atoms, dyn, extra = load_run(restart)
                         st = extra["stage"]
-                        stage = self.attach(v, name, atoms, dyn, st["info"])
+                        stage = self.restore_stage(v, name, atoms, dyn, st["info"])
                         if stage.analysis is not None:
                             stage.analysis.set_state(st["analysis"])
                         stage.t_run = float(st.get("t_run", 0.0))
                         resume = None
                     else:
                         try:
-                            atoms, dyn, info = self.setup(v, name)
+                            stage = self.build_stage(v, name)
                         except MemoryError as exc:
                             raise InputError("parameters", _sizes_text(self, v), "a sample that fits in memory",
                                              hint=str(exc)) from None
-                        stage = self.attach(v, name, atoms, dyn, info)
                     if attempt == 0:
-                        self._check_frames(v, stage)
+                        v = self._check_frames(v, stage)
                         self._check_wall(v, stage)
                     files += self._run_stage(v, k, stage, summaries, out, progress, len(names), watch)
                     break
@@ -529,11 +514,11 @@ class SceneDef:
                         raise
                     v = nv
             summaries.append(self.finish(v, stage))
-        quantities, notes, extra = self.analyse(v, summaries)
+        quantities, notes, extra, data = self.analysed(v, summaries)
         if out is not None and LAST_CHECKPOINT.get("path") == str(out / CHECKPOINT):
             files.append(out / CHECKPOINT)            # written by this run: listed with what it wrote
         res = SceneResult(self.name, quantities, 0.0, params=self.display(v), notes=list(notes),
-                          extra=extra, files=[f for f in files if f])
+                          extra=extra, files=[f for f in files if f], data=data)
         self.verdict(v, summaries, res)
         if out is not None:
             res.files += [Path(f) for f in self.report(v, summaries, res, out) or []]
@@ -765,4 +750,4 @@ def scene_params(params, *, frames=None, h5md_frames=20, checkpoint_every=10):
     return list(params) + [p for p in common if p.name not in own]
 
 
-__all__ = ["Stage", "SceneDef", "check_out", "scene_params", "CHECKPOINT"]
+__all__ = ["Stage", "Setup", "SceneDef", "check_out", "scene_params", "CHECKPOINT", "LIVE"]

@@ -60,8 +60,8 @@ def _params():
 
 
 def _material(v):
-    mat = get_material(v["material"])
-    return mat.replace(extra={**mat.extra, "mu": v["mu"]})
+    mat = get_material(v.material)
+    return mat.replace(extra={**mat.extra, "mu": v.mu})
 
 
 class UniaxialScene(SceneDef):
@@ -79,17 +79,17 @@ class UniaxialScene(SceneDef):
         self.description = f"MCA uniaxial {mode} of a brittle bar: peak stress vs {strength} strength"
 
     def check(self, v):
-        if v["size"][0] < MIN_LENGTH:
-            raise InputError("size", "x".join(map(str, v["size"])),
+        if v.size[0] < MIN_LENGTH:
+            raise InputError("size", "x".join(map(str, v.size)),
                              f"at least {MIN_LENGTH} automaton sizes along the bar (pairs within 1.2 d of a "
-                             f"grip never break: a shorter bar has no gauge section); e.g. {MIN_LENGTH}x{v['size'][1]}x{v['size'][2]}")
+                             f"grip never break: a shorter bar has no gauge section); e.g. {MIN_LENGTH}x{v.size[1]}x{v.size[2]}")
 
     def setup(self, v, stage):
         mat = _material(v)
         ref = mat.sigma_t if self.mode == "tension" else mat.sigma_c
-        s = build_uniaxial(mat, self.mode, d=v["d"], size=v["size"], packing=v["packing"],
-                           strain_max=v["strain_max"] * ref / mat.E, steps=v["steps"], damping=v["damping"],
-                           scatter=v["scatter"], seed=v["seed"])
+        s = build_uniaxial(mat, self.mode, d=v.d, size=v.size, packing=v.packing,
+                           strain_max=v.strain_max * ref / mat.E, steps=v.steps, damping=v.damping,
+                           scatter=v.scatter, seed=v.seed)
         lo, hi = s.grips
         info = {"L0": s.L0, "area": s.area, "sign": s.sign, "reference": float(s.reference),
                 "npairs0": int(s.npairs0), "steps": int(s.steps), "lo": lo.index.copy(), "hi": hi.index.copy()}
@@ -97,7 +97,7 @@ class UniaxialScene(SceneDef):
 
     def attach(self, v, stage, atoms, dyn, info):
         curve = UniaxialCurve(info["L0"], info["area"], info["sign"], info["lo"], info["hi"])
-        return Stage(stage, atoms, dyn, int(info["steps"]), v["frames"], info, on_frame=curve.add, analysis=curve,
+        return Stage(stage, atoms, dyn, int(info["steps"]), v.frames, info, on_frame=curve.add, analysis=curve,
                      per_particle=uniaxial_per_particle(dyn, int(info["npairs0"])))
 
     def finish(self, v, stage):
@@ -126,7 +126,7 @@ class UniaxialScene(SceneDef):
             "broken_links": Quantity(float(sm["broken"]), ""),
         }
         notes = [f"{sm['n']} automata, {sm['npairs']} pairs, dt = {sm['dt'] / units.ns:.4g} ns, "
-                 f"friction mu = {v['mu']}"]
+                 f"friction mu = {v.mu}"]
         extra = {"n_automata": sm["n"], "n_pairs": sm["npairs"], "stepping_time_s": sm["t_run"]}
         return q, notes, extra
 
@@ -148,7 +148,7 @@ class UniaxialScene(SceneDef):
         ax.axhline(ref, color="k", ls="--", lw=0.8, label=f"strength {ref:g} GPa")
         ax.set_xlabel(f"{mode} strain (%)")
         ax.set_ylabel(f"{mode} stress (GPa)")
-        ax.set_title(f"MCA {mode}: {v['material']}")
+        ax.set_title(f"MCA {mode}: {v.material}")
         ax.legend()
         fig.tight_layout()
         png = out / f"mca-{mode}-stress-strain.png"

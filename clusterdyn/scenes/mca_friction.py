@@ -53,17 +53,17 @@ def _params():
         Param("material_top", "alumina", "upper block material", kind="choice", choices=MATERIALS),
         Param("d", 10.0, "automaton size (2R)", unit="um", low=0.0, low_open=True),
         Param("size", (24, 4), "each block: periodic length x height in automaton sizes", kind="ints", low=2),
-        Param("stress", 0.05, "normal stress pressing the blocks together (> 0; below the softer block's "
+        Param("stress", 0.05, "normal stress pressing the blocks together (below the softer block's "
               "compressive or yield strength)", unit="GPa", low=0.0, low_open=True),
-        Param("V", 20.0, "sliding speed of the upper block's top row (> 0; at most 1% of the slower block's "
+        Param("V", 20.0, "sliding speed of the upper block's top row (at most 1% of the slower block's "
               "bar wave speed, sqrt(E/rho): a quasi-static slide)", unit="m/s", low=0.0, low_open=True),
-        Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s (>= 0)"),
-        Param("mu1", 0.3, "dry friction coefficient (>= 0)"),
-        Param("K_av", 0.0, "mean interlocking (>= 0)"),
-        Param("A1", 0.0, "mean amplitude of sinusoid 1 (>= 0)", unit="um"),
+        Param("mu0", 0.0, "viscous friction coefficient, MPa per m/s", low=0.0),
+        Param("mu1", 0.3, "dry friction coefficient", low=0.0),
+        Param("K_av", 0.0, "mean interlocking", low=0.0),
+        Param("A1", 0.0, "mean amplitude of sinusoid 1", unit="um", low=0.0),
         Param("l1", 5.0, "mean half-period of sinusoid 1", unit="um"),
         Param("d1", 20.0, "regularity length (mean section) of sinusoid 1", unit="um"),
-        Param("A2", 0.0, "mean amplitude of sinusoid 2 (>= 0)", unit="um"),
+        Param("A2", 0.0, "mean amplitude of sinusoid 2", unit="um", low=0.0),
         Param("l2", 1.0, "mean half-period of sinusoid 2", unit="um"),
         Param("d2", 5.0, "regularity length of sinusoid 2", unit="um"),
         Param("v_reg", 0.001, "regularising velocity of the dry part", unit="m/s", low=0.0, low_open=True),
@@ -85,11 +85,11 @@ def _check_coefficients(v):
     for k in ("A1", "A2"):
         if not v[k] >= 0:
             raise InputError(k, f"{v[k] / units.um:g}um", "an amplitude >= 0 um")
-    if not v["stress"] > 0:
-        raise InputError("stress", f"{v['stress'] / units.GPa:g}GPa",
+    if not v.stress > 0:
+        raise InputError("stress", f"{v.stress / units.GPa:g}GPa",
                          "a normal stress > 0 GPa (pressing the blocks together)")
-    if not v["V"] >= 0:
-        raise InputError("V", f"{v['V'] / units.m_s:g}m/s", "a sliding speed >= 0 m/s")
+    if not v.V >= 0:
+        raise InputError("V", f"{v.V / units.m_s:g}m/s", "a sliding speed >= 0 m/s")
 
 
 def _block(mat, mats, mid, d, size, pbc, remove_rows=None, steps_w=0):
@@ -116,14 +116,14 @@ def _block(mat, mats, mid, d, size, pbc, remove_rows=None, steps_w=0):
 def build_friction(v):
     """Sample, drives and dynamics of the friction scene (``v``: parsed parameters)."""
     _check_coefficients(v)
-    mats = [get_material(v["material"]), get_material(v["material_top"])]
-    if v["method"] == "explicit":
-        mats = [m.replace(extra={**m.extra, "mu": v["mu1"]}) for m in mats]
-    d = v["d"]
+    mats = [get_material(v.material), get_material(v.material_top)]
+    if v.method == "explicit":
+        mats = [m.replace(extra={**m.extra, "mu": v.mu1}) for m in mats]
+    d = v.d
     pbc = (True, False, False)
-    explicit = v["method"] == "explicit"
-    lo = _block(mats[0], mats, 0, d, v["size"], pbc, "top" if explicit else None, v["steps_w"])
-    up = _block(mats[1], mats, 1, d, v["size"], pbc, "bottom" if explicit else None, v["steps_w"])
+    explicit = v.method == "explicit"
+    lo = _block(mats[0], mats, 0, d, v.size, pbc, "top" if explicit else None, v.steps_w)
+    up = _block(mats[1], mats, 1, d, v.size, pbc, "bottom" if explicit else None, v.steps_w)
     atoms = stack_blocks([lo, up])
     st = atoms.calc.state
     y = atoms.positions[:, 1]
@@ -132,20 +132,20 @@ def build_friction(v):
     top = np.nonzero((body == 1) & np.isclose(y, y[body == 1].max()))[0]
     from ..mca.dynamics import default_timestep
     dt = default_timestep(atoms, st.materials)
-    T = v["steps"] * dt
-    t1, t2 = v["ramp"] * T, 2 * v["ramp"] * T
+    T = v.steps * dt
+    t1, t2 = v.ramp * T, 2 * v.ramp * T
     hold = Piston(bottom, 0.0)
-    tr = Traction(top, normal=(0.0, 1.0, 0.0), stress=Table([0.0, t1, T], [0.0, v["stress"], v["stress"]]),
-                  velocity=Table([0.0, t1, t2, T], [0.0, 0.0, v["V"], v["V"]]), tangent=(1.0, 0.0, 0.0))
+    tr = Traction(top, normal=(0.0, 1.0, 0.0), stress=Table([0.0, t1, T], [0.0, v.stress, v.stress]),
+                  velocity=Table([0.0, t1, t2, T], [0.0, 0.0, v.V, v.V]), tangent=(1.0, 0.0, 0.0))
     atoms.set_constraint([hold, tr])
     contact = None
     if not explicit:
-        contact = SegmentContact(mu0=v["mu0"] * MU0_UNIT, mu1=v["mu1"], K_av=v["K_av"], A1=v["A1"], l1=v["l1"],
-                                 d1=v["d1"], A2=v["A2"], l2=v["l2"], d2=v["d2"], v_reg=v["v_reg"],
-                                 seed=v["seed"])
+        contact = SegmentContact(mu0=v.mu0 * MU0_UNIT, mu1=v.mu1, K_av=v.K_av, A1=v.A1, l1=v.l1,
+                                 d1=v.d1, A2=v.A2, l2=v.l2, d2=v.d2, v_reg=v.v_reg,
+                                 seed=v.seed)
     else:
         st.flags["contacts"] = True
-    dyn = MCADynamics(atoms, dt, damping=v["damping"], hold_layer_rotation=True, contact=contact,
+    dyn = MCADynamics(atoms, dt, damping=v.damping, hold_layer_rotation=True, contact=contact,
                       contact_every=5 if explicit else 25)
     if explicit:
         dyn._contacts()           # the touching pairs across the interface from the start
@@ -227,16 +227,16 @@ class FrictionScene(SceneDef):
     def check(self, v):
         _check_coefficients(v)
         from ..materials import get_material
-        mats = [get_material(v["material"]), get_material(v["material_top"])]
+        mats = [get_material(v.material), get_material(v.material_top)]
         strength = min((m.sigma_c if getattr(m, "sigma_c", None) else m.sigma_y) for m in mats)
-        if v["stress"] >= strength:
-            raise InputError("stress", self.given("stress", v["stress"]), f"a stress below the softer block's "
+        if v.stress >= strength:
+            raise InputError("stress", self.given("stress", v.stress), f"a stress below the softer block's "
                              f"compressive or yield strength, {strength / units.GPa:g} GPa")
         vmax = 0.01 * min(math.sqrt(m.E / m.rho0) for m in mats)
-        if v["V"] > vmax:
-            raise InputError("V", self.given("V", v["V"]), f"a speed in (0, {vmax / units.m_s:.4g}] m/s "
+        if v.V > vmax:
+            raise InputError("V", self.given("V", v.V), f"a speed in (0, {vmax / units.m_s:.4g}] m/s "
                              "(1% of the slower block's bar wave speed sqrt(E/rho): a quasi-static slide)")
-        L, H = v["size"]
+        L, H = v.size
         if L < 3:
             raise InputError("size", f"{L}x{H}", "a periodic length of at least 3 automaton sizes")
 
@@ -245,10 +245,10 @@ class FrictionScene(SceneDef):
         return atoms, dyn, info
 
     def attach(self, v, stage, atoms, dyn, info):
-        if v["method"] == "segment" and dyn.contact is None:
+        if v.method == "segment" and dyn.contact is None:
             raise InputError("--restart", "a run without segment contact", "a mca-friction checkpoint")
         curve = FrictionCurve(info["area"])
-        return Stage(stage, atoms, dyn, v["steps"], v["frames"], info, on_frame=curve.add, analysis=curve)
+        return Stage(stage, atoms, dyn, v.steps, v.frames, info, on_frame=curve.add, analysis=curve)
 
     def finish(self, v, stage):
         c = stage.dyn.contact
@@ -259,7 +259,7 @@ class FrictionScene(SceneDef):
     def analyse(self, v, summaries):
         sm = summaries[0]
         mu, sd, ns = steady_mu(sm["curve"], sm["t_slide"], sm["T"])
-        ref = v["mu1"] + v["K_av"] if v["method"] == "segment" else None
+        ref = v.mu1 + v.K_av if v.method == "segment" else None
         cur = sm["curve"]
         q = {
             "mu_dr": Quantity(mu, "", reference=ref, spread=sd,
@@ -275,13 +275,13 @@ class FrictionScene(SceneDef):
         if s:
             q["contacts"] = Quantity(float(s["contacts"]), "", note="segment contacts at the end")
             q["K_mu_clips"] = Quantity(float(s["clips"]), "", note="contact-steps with K_mu clipped at 0")
-        notes = [f"{sm['n']} automata, dt = {sm['dt'] / units.ns:.4g} ns, method {v['method']}"]
+        notes = [f"{sm['n']} automata, dt = {sm['dt'] / units.ns:.4g} ns, method {v.method}"]
         return q, notes, {"stepping_time_s": sm["t_run"], "n_automata": sm["n"]}
 
     def report(self, v, summaries, result, out):
         sm = summaries[0]
         c = {k: np.asarray(x, float) for k, x in sm["curve"].items() if isinstance(x, list)}
-        path = out / "mca-friction-mu.csv"
+        path = out / "mca_friction_mu.csv"
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["time_ns", "sliding_um", "mu_dr", "FN_N_per_A", "contacts", "mean_K_mu", "K_mu_clips",
@@ -290,7 +290,7 @@ class FrictionScene(SceneDef):
                            c["contacts"], c["mean_K"], c["clips"], c["friction_work"] * JM,
                            c["damping_work"] * JM, c["drive_work"] * JM):
                 w.writerow(row)
-        png = friction_plot(c, v, out / "mca-friction-mu.png", sm["t_slide"])
+        png = friction_plot(c, v, out / "mca_friction_mu.png", sm["t_slide"])
         return [path, png]
 
 
@@ -306,11 +306,11 @@ def friction_plot(c, v, path, t_slide):
     axs[1].set_xlabel("sliding distance (um)")
     for ax in axs:
         ax.set_ylabel("mu_dr = F_dr / F_N")
-        if v["method"] == "segment":
-            ax.axhline(v["mu1"] + v["K_av"], color="k", ls="--", lw=0.8, label="mu1 + K_av")
+        if v.method == "segment":
+            ax.axhline(v.mu1 + v.K_av, color="k", ls="--", lw=0.8, label="mu1 + K_av")
             ax.legend()
-    fig.suptitle(f"MCA friction ({v['method']}): V = {v['V'] / units.m_s:g} m/s, "
-                 f"stress = {v['stress'] / units.GPa * 1e3:g} MPa")
+    fig.suptitle(f"MCA friction ({v.method}): V = {v.V / units.m_s:g} m/s, "
+                 f"stress = {v.stress / units.GPa * 1e3:g} MPa")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

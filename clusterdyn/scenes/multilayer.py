@@ -103,20 +103,20 @@ PARAMS = [
 
 def build_multilayer(v):
     """The stack and the sphere, calculator and dynamics; returns ``(atoms, dyn, info)``."""
-    r0, V, ax = v["r0"], v["V"], parse_axis(v["axis"])
+    r0, V, ax = v.r0, v.V, parse_axis(v.axis)
     e = np.eye(3)[ax]
     gaps = [CONTACT_GAP * r0 if g is None else g for g in GAPS]
-    stack = plate_stack(LAYERS, r0, v["radius"], gaps=gaps, axis=ax, origin=(0.0, 0.0, 0.0), orientation="100")
-    rot = Rotation.random(random_state=v["seed"]).as_matrix()
-    sp = sphere(v["sphere_material"], r0, v["diameter"], velocity=V * e, axis=ax, orientation=rot)
+    stack = plate_stack(LAYERS, r0, v.radius, gaps=gaps, axis=ax, origin=(0.0, 0.0, 0.0), orientation="100")
+    rot = Rotation.random(random_state=v.seed).as_matrix()
+    sp = sphere(v.sphere_material, r0, v.diameter, velocity=V * e, axis=ax, orientation=rot)
     sp = place(sp, stack, axis=ax, gap=START_GAP * r0, side=-1, align=True)
     atoms = combine_bodies([stack, sp])
-    calc = ClusterDynamics(rc=v["rc"])
+    calc = ClusterDynamics(rc=v.rc)
     atoms.calc = calc
-    thermal_noise(atoms, v["noise"], v["seed"])
+    thermal_noise(atoms, v.noise, v.seed)
     calc.setup(atoms)
-    dt = v["dt_factor"] * min(p.r0 / (p.c0 + V) for p in calc.potentials)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+    dt = v.dt_factor * min(p.r0 / (p.c0 + V) for p in calc.potentials)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v.J)
     dyn.start_ledger()
     body = atoms.arrays["body"]
     z = atoms.positions[:, ax]
@@ -128,11 +128,11 @@ def build_multilayer(v):
                        "hi": float(zk.max() + 0.5 * r0), "n": int((body == k).sum())})
     gap = float(layers[0]["lo"] - (z[body == nl].max() + 0.5 * r0))
     t_contact = max(0.0, gap) / V
-    nsteps = int(math.ceil((v["t_end"] + t_contact) / dt))
+    nsteps = int(math.ceil((v.t_end + t_contact) / dt))
     announce_cost("multilayer", len(atoms), nsteps)
     m = atoms.get_masses()
     info = {"r0": r0, "V": V, "axis": ax, "dt": dt, "nsteps": nsteps, "t_contact": t_contact, "layers": layers,
-            "radius": v["radius"], "n_sphere": int((body == nl).sum()), "sphere_body": nl,
+            "radius": v.radius, "n_sphere": int((body == nl).sum()), "sphere_body": nl,
             "m_sphere_g": float(m[body == nl].sum() / units.g), "rotation": rot.tolist()}
     return atoms, dyn, info
 
@@ -197,24 +197,24 @@ class MultilayerScene(SceneDef):
 
     def check(self, v):
         thin = min(t for _, t in LAYERS)
-        if v["r0"] > thin:
-            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the thinnest layer {thin / units.mm:g} mm")
-        if v["radius"] < v["diameter"]:
-            raise InputError("radius", f"{v['radius'] / units.mm:g}mm", "at least the sphere diameter")
-        if v["diameter"] < 4 * v["r0"]:
-            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most a quarter of the sphere diameter, "
-                             f"{v['diameter'] / 4 / units.mm:g} mm (a sphere of a few clusters across)")
-        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
+        if v.r0 > thin:
+            raise InputError("r0", f"{v.r0 / units.mm:g}mm", f"at most the thinnest layer {thin / units.mm:g} mm")
+        if v.radius < v.diameter:
+            raise InputError("radius", f"{v.radius / units.mm:g}mm", "at least the sphere diameter")
+        if v.diameter < 4 * v.r0:
+            raise InputError("r0", f"{v.r0 / units.mm:g}mm", f"at most a quarter of the sphere diameter, "
+                             f"{v.diameter / 4 / units.mm:g} mm (a sphere of a few clusters across)")
+        late = [t for t in parse_times(v.image_times, "image_times", []) if t > v.t_end * (1 + 1e-9)]
         if late:
-            raise InputError("image_times", v["image_times"], f"auto or times within the run, 0-"
-                             f"{v['t_end'] / units.us:g} us (t_end)")
+            raise InputError("image_times", v.image_times, f"auto or times within the run, 0-"
+                             f"{v.t_end / units.us:g} us (t_end)")
 
     def setup(self, v, stage):
         return build_multilayer(v)
 
     def attach(self, v, stage, atoms, dyn, info):
-        te = v["t_end"]
-        times = parse_times(v["image_times"], "image_times", [te / 3.0, 2.0 * te / 3.0, te])
+        te = v.t_end
+        times = parse_times(v.image_times, "image_times", [te / 3.0, 2.0 * te / 3.0, te])
         rec = StackRecord(atoms, dyn, info, [t for t in times if t <= te * (1 + 1e-9)])
         nframes = max(1, int(round(info["nsteps"] * info["dt"] / FRAME_TIME)))
         return Stage(stage, atoms, dyn, int(info["nsteps"]), nframes, info, on_frame=rec.frame, analysis=rec)
@@ -288,7 +288,7 @@ class MultilayerScene(SceneDef):
                      f"{sm['t_run']:.1f} s stepping, {sm['n'] * sm['steps'] / max(sm['t_run'], 1e-9):.3g} "
                      f"particle-steps/s, {sm['nbuilds']} neighbour-list builds; {sm['n_fragments']} fragments")
         notes.append(lnote)
-        for r in v.get("_retried", []):
+        for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         extra = {"holes_mm": [[r["t"] / units.us] + [d / units.mm for d in r["holes"]] for r in sm["rows"]],
                  "perforated": perforated, "ledger_J": sm["ledger"], "n_clusters": sm["n"], "steps": sm["steps"],

@@ -1,4 +1,5 @@
-"""Scenes ``plate-impact`` and ``polycrystal-shock`` (docs/theory.md 1.4, 1.7).
+"""Scene ``plate-impact`` (docs/theory.md 1.4, 1.7) and the polycrystal relaxation the
+``polycrystal-shock`` scene (:mod:`clusterdyn.scenes.polycrystal_shock`) shares.
 
 ``plate-impact``: two aluminium plates, free along x and periodic across,
 collide at a relative speed ``v`` (each moves at v/2 toward the other, the
@@ -13,10 +14,6 @@ Al-1100 Hugoniot at u = v/2), the speeds of the elastic precursor and of
 the main wave (in the target's frame), the free-surface plateau (against
 v) and the pullback after it.
 
-``polycrystal-shock``: a piston shock (DampedVerlet + Piston, the shock
-scene's tracker) in a relaxed polycrystal of a chosen porosity; D, u, P and
-the same run on a [100] single crystal beside the experimental Hugoniot.
-
 Relaxation of a polycrystal (:func:`relax_sample`): grain-boundary clusters
 left at ``d_min`` repel strongly, so the sample is quenched first: cycles of
 damped dynamics (J = 2) after which all velocities are zeroed and the
@@ -25,6 +22,7 @@ periodic cross-section is rescaled toward zero lateral stress.
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,10 +37,8 @@ from ..materials import get_material, hugoniot
 from ..md import DampedVerlet
 from ..md.damped import TIMESTEP_FACTOR
 from .base import Param, Quantity, register_scene
-from .common import make_piston, matplotlib_agg, piston_thickness, thermal_noise
-from .lifecycle import SceneDef, Stage, scene_params
-from ..analysis.shock import ShockTracker
-from .shock import ShockSetup, shock_info, shock_quantities, shock_stage, shock_summary
+from .common import matplotlib_agg, thermal_noise
+from .lifecycle import SceneDef, Setup, Stage, scene_params
 
 #: gap between the plates' surfaces at the start, in r0 (just beyond the cutoff)
 GAP = 1.25
@@ -213,11 +209,12 @@ def build_impact(sample="single", material="Al", v=500 * units.m_s, r0=10 * unit
 class ImpactRecord:
     """Analysis state of an impact run: slab profiles every frame and the rear free-surface velocity."""
 
-    def __init__(self, atoms, dyn, info):
-        r0, self.v = info["r0"], info["v"]
+    def __init__(self, setup):
+        atoms, dyn = setup.atoms, setup.dyn
+        r0, self.v = setup.r0, setup.v
         x = atoms.positions[:, 0]
         self.rec = ProfileRecorder(2.0 * r0, axis=0, lo=x.min() - 10 * r0, hi=x.max() + 10 * r0)
-        self.rear = np.asarray(info["rear"], dtype=np.int64)
+        self.rear = np.asarray(setup.rear, dtype=np.int64)
         self.m_rear = atoms.get_masses()[self.rear]
         self.atoms, self.dyn = atoms, dyn
         self.fsv_t, self.fsv_v = [], []
@@ -242,13 +239,33 @@ class ImpactRecord:
         self.fsv_v = [float(x) for x in st["fsv_v"]]
 
 
-def impact_info(s):
-    """The encodable set-up facts of a :func:`build_impact` dict (what the analysis and a restart need)."""
-    info = {k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer", "target", "width", "sample", "c0")}
-    info["rear"] = np.nonzero(s["rear"])[0]
-    info["reports"] = [r if r is not None else {} for r in s["reports"]]
-    info["relax"] = s["relax"] if s["relax"] is not None else {}
-    return info
+@dataclass
+class ImpactSetup(Setup):
+    """A built plate impact (ASE units): the two plates with their dynamics, and what the analysis
+    needs (the checkpoint's payload, :class:`~clusterdyn.scenes.lifecycle.Setup`)."""
+
+    r0: float = 0.0
+    v: float = 0.0                 #: impact speed (flyer against the target at rest, lab frame: +-v/2)
+    dt: float = 0.0
+    x_impact: float = 0.0          #: the plates' contact plane at set-up
+    x_rear: float = 0.0            #: the target's rear face at set-up
+    flyer: float = 0.0             #: plate thicknesses
+    target: float = 0.0
+    width: float = 0.0             #: periodic width across
+    sample: str = "single"
+    c0: float = 0.0
+    rear: np.ndarray = None        #: rows of the target's rear layer (the VISAR probe)
+    reports: list = None           #: the builder's report on each plate ({} for a single crystal)
+    relax: dict = None             #: the relaxation's record ({} when none ran)
+    nsteps: int = 0
+
+    @classmethod
+    def built(cls, s, **more):
+        """The set-up of a :func:`build_impact` dict ``s`` (``more``: a subclass's fields)."""
+        return cls(s["atoms"], s["dyn"], **{k: s[k] for k in ("r0", "v", "dt", "x_impact", "x_rear", "flyer",
+                                                                 "target", "width", "sample", "c0")},
+                   rear=np.nonzero(s["rear"])[0], reports=[r if r is not None else {} for r in s["reports"]],
+                   relax=s["relax"] if s["relax"] is not None else {}, **more)
 
 
 def impact_duration(info, duration=None):
@@ -547,35 +564,36 @@ class PlateImpactScene(SceneDef):
     description = ("two Al plates colliding: stress and von Mises profiles, precursor, VISAR trace; "
                    "single crystal vs polycrystal")
     params = scene_params(PARAMS)
+    setup_class = ImpactSetup
 
     def check(self, v):
-        if v["sample"] != "single" and v["grain_size"] > 2 * min(v["flyer"], v["target"]):
-            raise InputError("grain_size", v["grain_size"], f"at most twice the thinner plate "
-                             f"({min(v['flyer'], v['target']):g} r0)")
-        _profile_times(v["profile_times"], {"c0": 1.0, "target": 1.0})
-        if v["packing"] is not None:
+        if v.sample != "single" and v.grain_size > 2 * min(v.flyer, v.target):
+            raise InputError("grain_size", v.grain_size, f"at most twice the thinner plate "
+                             f"({min(v.flyer, v.target):g} r0)")
+        _profile_times(v.profile_times, {"c0": 1.0, "target": 1.0})
+        if v.packing is not None:
             from .packing import resolve_packing
-            resolve_packing(v["packing"])            # checked before any work
+            resolve_packing(v.packing)            # checked before any work
 
     def plan(self, v):
-        return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
+        return ["single", "polycrystal"] if v.sample == "both" else [v.sample]
 
     def setup(self, v, stage):
-        s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
-                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
-                         boundaries=v["boundaries"], packing=v["packing"])
-        info = impact_info(s)
-        info["nsteps"] = int(math.ceil(impact_duration(info, v["duration"]) / s["dt"]))
-        return s["atoms"], s["dyn"], info
+        s = build_impact(stage, "Al", v.v, v.r0, v.flyer, v.target, v.width, v.grain_size,
+                         v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
+                         boundaries=v.boundaries, packing=v.packing)
+        setup = ImpactSetup.built(s)
+        setup.nsteps = int(math.ceil(impact_duration(setup, v.duration) / s["dt"]))
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
-        end = impact_duration(info, v["duration"])
-        late = [t for t in _profile_times(v["profile_times"], info) if t > end * (1 + 1e-9)]
+    def attach(self, v, stage, setup):
+        end = impact_duration(setup, v.duration)
+        late = [t for t in _profile_times(v.profile_times, setup) if t > end * (1 + 1e-9)]
         if late:
-            raise InputError("profile_times", v["profile_times"], f"times within the run, 0-{end / units.ns:.4g} ns "
+            raise InputError("profile_times", v.profile_times, f"times within the run, 0-{end / units.ns:.4g} ns "
                              "(set duration to run longer)")
-        rec = ImpactRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
+        rec = ImpactRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
@@ -606,11 +624,11 @@ class PlateImpactScene(SceneDef):
             a, b = results["single"][2], results["polycrystal"][2]
             quantities["plateau_ratio"] = Quantity(b["vm_plateau"] / a["vm_plateau"], "",
                                                    note="polycrystal / single-crystal intensity plateau")
-        return quantities, notes, {}
+        return quantities, notes, {}, results
 
     def report(self, v, summaries, result, out):
-        results = self._results(summaries)
-        times_by = {name: _profile_times(v["profile_times"], info) for name, (info, _, _) in results.items()}
+        results = result.data
+        times_by = {name: _profile_times(v.profile_times, info) for name, (info, _, _) in results.items()}
         plot_impact(results, out / "plate_impact_profiles.png", times_by)
         plot_visar(results, out / "plate_impact_visar.png")
         files = [out / "plate_impact_profiles.png", out / "plate_impact_visar.png"]
@@ -628,170 +646,3 @@ register_scene(PlateImpactScene())
 def _summary(r):
     return (f"{r['n_clusters']} clusters, {r['n_grains']} grains, {r['clusters_per_grain_mean']:.0f} per "
             f"grain, porosity {100 * r['porosity']:.1f}%, d_min {r['d_min_r0']:.3f} r0")
-
-
-# --------------------------------------------------------------------------- polycrystal shock (D-u)
-def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="Al", r0=10 * units.um,
-                            length=80.0, width=16.0, grain_size=8.0, porosity=0.06, d_min=0.85, seed=1,
-                            noise=10 * units.m_s, J=None, dt_factor=TIMESTEP_FACTOR, relax_cycles=12,
-                            packing=None):
-    """Piston shock set-up at ``u`` in a relaxed polycrystal (or a [100] single crystal).
-
-    ``packing`` (polycrystal; :mod:`clusterdyn.scenes.packing`): grain size, porosity and boundaries
-    from a preset or file (the boundary law's term attached to the dynamics).
-
-    The block (``length`` x ``width`` x ``width`` r0, periodic across) is
-    relaxed (:func:`relax_sample`) and a 1.5 r0 layer at x-min becomes the
-    piston.  The density ahead of the front is the porous sample's own.
-
-    Returns
-    -------
-    (ShockSetup, dict)
-        The set-up and a dict with the sample report and the relaxation.
-    """
-    mat = get_material(material)
-    a = SQRT2 * r0
-    W = max(2, int(round(width / SQRT2))) * a
-    spec = None
-    if packing is not None and sample != "single":
-        from .packing import resolve_packing
-        spec = resolve_packing(packing)
-        grain_size, porosity = spec["grain_size"], spec["porosity"]
-    if sample == "single":
-        atoms = fcc_packing(mat, r0, direction="100", shape=Plate(length * r0, W, axis=0),
-                            pbc=(False, True, True))
-        report = None
-    else:
-        atoms = polycrystal(mat, r0, Plate(length * r0, W, axis=0), grain_size=grain_size * r0, seed=seed,
-                            pbc=(False, True, True), d_min=d_min, target_porosity=porosity)
-        report = atoms.info["polycrystal"]
-    atoms.set_cell([(length + 40) * r0, W, W])
-    term = None
-    if spec is not None:
-        from .packing import prepare
-        calc, term, relax = prepare(atoms, spec, 1.15, (lambda at, t: relax_sample(at, cycles=relax_cycles, term=t))
-                                    if relax_cycles else None)
-    else:
-        calc = ClusterDynamics()
-        atoms.calc = calc
-        relax = relax_sample(atoms, cycles=relax_cycles) if sample != "single" and relax_cycles else None
-    atoms.positions[:, 0] -= atoms.positions[:, 0].min() - 2 * r0
-    calc.setup(atoms)
-    pot = calc.potentials[0]
-    mask, piston = make_piston(atoms, piston_thickness(r0), u)
-    thermal_noise(atoms, noise, seed, exclude=mask)
-    atoms.set_constraint(piston)
-    atoms.set_momenta(atoms.get_momenta())
-    dt = dt_factor * r0 / (pot.c0 + u)
-    dyn = DampedVerlet(atoms, timestep=dt, J=J)
-    if term is not None:
-        dyn.attach_piece(term)
-    L = np.ptp(atoms.positions[:, 0])
-    rho0 = atoms.get_masses().sum() / ((L + a / 2) * W * W)
-    try:
-        d_guess = hugoniot("Al-1100").D(u) if mat.name == "Al" else pot.c0 + 1.3 * u
-    except InputError:
-        d_guess = pot.c0 + 1.3 * u
-    nsteps = int(math.ceil(0.8 * L / d_guess / dt))
-    setup = ShockSetup(atoms, calc, dyn, piston, mask, nsteps, max(a, r0), L, mat.replace(rho0=rho0), u,
-                       rho0=rho0)
-    return setup, {"report": report or {}, "relax": relax or {}}
-
-
-SHOCK_PARAMS = [
-    Param("u", 1.0, "piston speed", unit="km/s", low=0.0, high=10.0, low_open=True),
-    Param("porosity", 0.06, "target porosity of the polycrystal", low=0.0, high=0.5),
-    Param("grain_size", 8.0, "mean grain diameter, in r0", low=3.0),
-    Param("r0", 10.0, "cluster size", unit="um", low=0.0, low_open=True),
-    Param("length", 80.0, "block length along the shock, in r0", low=10.0),
-    Param("width", 16.0, "periodic width across, in r0", low=3.0),
-    Param("seed", 1, "random seed", kind="int", low=0),
-    Param("single", True, "also run a [100] single crystal for comparison", kind="bool"),
-    Param("frames", 40, "profiles recorded over the run", kind="int", low=5),
-    Param("packing", None, "a packing preset or JSON file (clusterdyn.scenes.packing: grain size, porosity, "
-          "boundaries); none = porosity and grain_size above", kind="str", optional=True),
-]
-
-
-class PolycrystalShockScene(SceneDef):
-    """The ``polycrystal-shock`` scene on the lifecycle (stages: pc, then sc)."""
-
-    name = "polycrystal-shock"
-    description = ("piston shock in a relaxed Al polycrystal of given porosity: D-u point beside the single "
-                   "crystal and the experimental Hugoniot")
-    params = scene_params(SHOCK_PARAMS)
-
-    def plan(self, v):
-        return ["pc", "sc"] if v["single"] else ["pc"]
-
-    def setup(self, v, stage):
-        s, extra = polycrystal_shock_setup(v["u"], "polycrystal" if stage == "pc" else "single", r0=v["r0"],
-                                           length=v["length"], width=v["width"], grain_size=v["grain_size"],
-                                           porosity=v["porosity"], seed=v["seed"], packing=v["packing"])
-        info = shock_info(s)
-        info.update(extra)
-        return s.atoms, s.dyn, info
-
-    def attach(self, v, stage, atoms, dyn, info):
-        mat = get_material("Al").replace(rho0=float(info["rho0"]))
-        return shock_stage(stage, atoms, dyn, info, mat, v["frames"])
-
-    def finish(self, v, stage):
-        sm = shock_summary(stage)
-        sm.update({"name": stage.name, "report": stage.info["report"], "relax": stage.info["relax"]})
-        return sm
-
-    def analyse(self, v, summaries):
-        u = v["u"]
-        mat = get_material("Al")
-        ref = hugoniot("Al-1100")
-        q, notes = {}, []
-        for sm in summaries:
-            key = sm["name"]
-            state = ShockTracker.from_state(sm["tracker"]).result()
-            qq, _ = shock_quantities(state, mat, u)
-            for name in ("D", "u", "P", "rho"):
-                q[f"{key}_{name}"] = qq[name]
-            notes.append(f"{key}: {sm['n']} clusters, rho0 {sm['rho0'] / units.g_cm3:.4f} g/cm3, "
-                         f"{sm['nsteps']} steps, {' '.join(state.notes) or 'steady'}")
-            if key == "pc" and sm["report"]:
-                notes.append("polycrystal: " + _summary(sm["report"]))
-                q["pc_porosity"] = Quantity(sm["report"]["porosity"], "", v["porosity"])
-        notes.append(f"reference: Al-1100 D = {ref.D(u) / units.km_s:.3f} km/s at u = {u / units.km_s:g} km/s "
-                     "(dense metal; a porous sample's own Hugoniot lies lower)")
-        return q, notes, {}
-
-    def report(self, v, summaries, result, out):
-        import csv
-        ref = hugoniot("Al-1100")
-        plt = matplotlib_agg()
-        fig, ax = plt.subplots(figsize=(6, 4.5))
-        uu = np.linspace(0, 3, 50)
-        ax.plot(uu, ref.D(uu * units.km_s) / units.km_s, "k-", label="Al-1100 (experiment)")
-        rows = []
-        for sm in summaries:
-            state = ShockTracker.from_state(sm["tracker"]).result()
-            lab = {"pc": "CD polycrystal", "sc": "CD single crystal [100]"}[sm["name"]]
-            if sm["name"] == "pc" and sm["report"]:
-                lab += f" (porosity {100 * sm['report']['porosity']:.1f}%)"
-            ax.errorbar([state.u / units.km_s], [state.D_fit / units.km_s], yerr=[state.D_fit_err / units.km_s],
-                        fmt="o", label=lab)
-            rows.append([sm["name"], state.u / units.km_s, state.D_fit / units.km_s, state.D_fit_err / units.km_s,
-                         sm["rho0"] / units.g_cm3])
-        ax.set_xlabel("u (km/s)")
-        ax.set_ylabel("D (km/s)")
-        ax.legend()
-        ax.set_title("D-u point")
-        fig.tight_layout()
-        png = out / "polycrystal_shock_Du.png"
-        fig.savefig(png, dpi=110)
-        plt.close(fig)
-        path = out / "polycrystal_shock_Du.csv"
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["sample", "u_km_s", "D_km_s", "D_err_km_s", "rho0_g_cm3"])
-            w.writerows(rows)
-        return [png, path]
-
-
-register_scene(PolycrystalShockScene())

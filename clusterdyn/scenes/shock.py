@@ -9,7 +9,7 @@ experimental Hugoniot (Al: Al-1100, D = 5.392 + 1.341 u km/s).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from .base import Param, Quantity, register_scene
 from ..md.histories import Table
 from ..md.layer_drives import Piston
 from .common import make_piston, matplotlib_agg, piston_layer, piston_thickness, run_frames, thermal_noise
-from .lifecycle import SceneDef, Stage, scene_params
+from .lifecycle import LIVE, SceneDef, Setup, Stage, scene_params
 
 #: the library materials with a cold curve (materials registered later are not in the choice list)
 CD_MATERIALS = tuple(cd_material_names())
@@ -199,23 +199,39 @@ PARAMS = [
 
 
 @dataclass
-class ShockSetup:
-    atoms: object
-    calc: object
-    dyn: object
-    piston: object
-    piston_mask: object
-    nsteps: int
-    slab: float
-    length: float
-    material: object
-    u: float
-    rest_volume: object = None      #: (N,) volume of each cluster at rest (two-phase samples)
-    rho0: float = None              #: mean density at rest (default material.rho0)
-    two_phase: dict = None          #: atoms.info['two_phase'] of a two-phase sample
-    axis: int = 0                   #: shock direction (0, 1, 2)
-    fit_from: float = None          #: front travel (Angstrom) before the fit window starts
-    size: tuple = None              #: repeat cells (nx, ny, nz) of the sample
+class ShockSetup(Setup):
+    """A built piston shock (ASE units): the sample and dynamics, and the facts its front tracker
+    needs, which are also the checkpoint's payload (:class:`~clusterdyn.scenes.lifecycle.Setup`)."""
+
+    piston_index: np.ndarray = None  #: indices of the piston's clusters
+    nsteps: int = 0                  #: steps of the run
+    slab: float = 0.0                #: slab width of the profiles
+    length: float = 0.0              #: the sample's extent along the shock
+    u: float = 0.0                   #: piston speed (the largest of a U(t) history)
+    rho0: float = None               #: mean density at rest
+    x0: float = 0.0                  #: start of the sample along the shock (the piston left out)
+    rest_volume: np.ndarray = None   #: (N,) volume of each cluster at rest
+    axis: int = 0                    #: shock direction (0, 1, 2)
+    two_phase: dict = None           #: atoms.info['two_phase'] of a two-phase sample
+    fit_from: float = None           #: front travel (Angstrom) before the fit window starts
+    size: tuple = ()                 #: repeat cells (nx, ny, nz) of the sample (empty: not a repeat block)
+    sample: dict = None              #: the builder's report on the sample (polycrystal, relaxation)
+    material: object = field(default=None, repr=False, metadata=LIVE)   #: the Material (None when restored)
+
+    @property
+    def calc(self):
+        return self.atoms.calc
+
+    @property
+    def piston_mask(self):
+        mask = np.zeros(len(self.atoms), bool)
+        mask[np.asarray(self.piston_index, dtype=np.int64)] = True
+        return mask
+
+    @property
+    def piston(self):
+        """The piston drive (the constraint with a ``force``)."""
+        return next(c for c in self.atoms.constraints if hasattr(c, "force"))
 
 
 #: the time step follows r0/(c0 + u) until the sound speed at the shock's compression exceeds
@@ -386,8 +402,9 @@ def build_shock(material="Al", u=3 * units.km_s, direction="100", size="auto", r
     nsteps = int(math.ceil(t_end / dt))
     # slab width: one repeat length along x for [100] (two planes), at least r0
     slab = max(float(repeat_lengths(direction, r0)[0]), r0)
-    return ShockSetup(atoms, calc, dyn, piston, mask, nsteps, slab, length, mat, u, vrest, rho0, info, axis,
-                      fit_from, size)
+    return ShockSetup(atoms, dyn, piston_index=np.nonzero(mask)[0], nsteps=nsteps, slab=slab, length=length, u=u,
+                      rho0=rho0, x0=float(atoms.positions[~mask, axis].min()), rest_volume=vrest, axis=axis,
+                      two_phase=info, fit_from=fit_from, size=size, material=mat)
 
 
 def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", tracker=None):
@@ -396,26 +413,32 @@ def run_shock(setup, frames=60, progress=True, on_frame=None, desc="shock", trac
     The library form of the ``shock`` scene's run (no files, no checkpoints: the
     scene's lifecycle adds those).
     """
-    atoms, calc = setup.atoms, setup.calc
     if tracker is None:
-        tracker = shock_tracker(setup, atoms.positions[~setup.piston_mask, setup.axis].min())
-
-    def frame(dyn):
-        out = calc.compute(atoms, per_particle=True, forces=False)
-        pist = atoms.positions[setup.piston_mask, setup.axis].max()
-        tracker.add(dyn.get_time(), atoms, out["virials"], pist, exclude=setup.piston_mask)
-        if on_frame is not None:
-            on_frame(dyn)
-
-    t_run = run_frames(setup.dyn, setup.nsteps, frames, frame, progress=progress, desc=desc)
+        tracker = shock_tracker(setup)
+    t_run = run_frames(setup.dyn, setup.nsteps, frames, shock_frame(setup, tracker, on_frame), progress=progress,
+                       desc=desc)
     return tracker, tracker.result(), t_run
 
 
-def shock_tracker(setup, x0):
-    """The front tracker of a shock set-up, its slabs from ``x0`` (the sample's start) on."""
+def shock_tracker(setup):
+    """The front tracker of a shock set-up, its slabs from the sample's start ``setup.x0`` on."""
     rho0 = setup.material.rho0 if setup.rho0 is None else setup.rho0
+    x0 = setup.x0
     return ShockTracker(rho0, setup.u, setup.slab, axis=setup.axis, lo=x0,
                         hi=x0 + setup.length + setup.slab, rest_volume=setup.rest_volume, fit_from=setup.fit_from)
+
+
+def shock_frame(setup, tracker, on_frame=None):
+    """The per-frame call of a shock run: the particles' virials, then one tracker frame (the piston
+    left out); ``on_frame(dyn)`` after it."""
+    atoms, calc, mask, ax = setup.atoms, setup.calc, setup.piston_mask, setup.axis
+
+    def frame(dyn):
+        out = calc.compute(atoms, per_particle=True, forces=False)
+        tracker.add(dyn.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
+        if on_frame is not None:
+            on_frame(dyn)
+    return frame
 
 
 def plot_shock(tracker, state, path, title="", u=None, P_ref=None):
@@ -514,41 +537,17 @@ def shock_quantities(state, mat, u, reference=True):
 MIN_CELLS = 10
 
 
-def shock_info(s):
-    """The encodable set-up facts of a :class:`ShockSetup` (what a restart needs besides the particles)."""
-    ax = s.axis
-    return {"piston": np.nonzero(s.piston_mask)[0], "nsteps": s.nsteps, "slab": s.slab, "length": s.length,
-            "u": s.u, "rho0": s.rho0 if s.rho0 else s.material.rho0, "axis": ax,
-            "x0": float(s.atoms.positions[~s.piston_mask, ax].min()),
-            "two_phase": {k: x for k, x in (s.two_phase or {}).items()},
-            "fit_from": s.fit_from, "size": None if s.size is None else list(s.size)}
-
-
-def shock_stage(name, atoms, dyn, info, material, frames):
+def shock_stage(name, setup, frames):
     """The lifecycle stage of a piston shock: front tracker every frame, the piston's force as observables."""
-    mask = np.zeros(len(atoms), bool)
-    mask[np.asarray(info["piston"], dtype=np.int64)] = True
-    calc = atoms.calc
-    pistons = [c for c in atoms.constraints if hasattr(c, "force")]
-    two = info["two_phase"] or None
-    setup = ShockSetup(atoms, calc, dyn, pistons[0], mask, int(info["nsteps"]), float(info["slab"]),
-                       float(info["length"]), material, float(info["u"]), rest_volumes(atoms), float(info["rho0"]), two,
-                       int(info["axis"]), info.get("fit_from"), tuple(info.get("size") or ()))
-    tracker = shock_tracker(setup, float(info["x0"]))
-    ax = setup.axis
-
-    def frame(d):
-        out = calc.compute(atoms, per_particle=True, forces=False)
-        tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
-
+    atoms, ax = setup.atoms, setup.axis
+    tracker = shock_tracker(setup)
     others = [k for k in range(3) if k != ax]
     area = atoms.cell[others[0], others[0]] * atoms.cell[others[1], others[1]]
     piston = setup.piston
     obs = {"piston_force": (lambda a: -piston.force[ax] / units.N, "N"),
            "piston_pressure": (lambda a: -piston.force[ax] / area / units.GPa, "GPa")}
-    st = Stage(name, atoms, dyn, setup.nsteps, frames, info, on_frame=frame, analysis=tracker, observables=obs)
-    st.setup = setup
-    return st
+    return Stage(name, atoms, setup.dyn, setup.nsteps, frames, on_frame=shock_frame(setup, tracker),
+                 analysis=tracker, observables=obs, setup=setup)
 
 
 def shock_summary(stage):
@@ -557,8 +556,8 @@ def shock_summary(stage):
     pot = s.calc.potentials[0]
     return {"tracker": stage.analysis.get_state(), "n": len(s.atoms), "nsteps": s.nsteps, "t_run": stage.t_run,
             "nbuilds": s.calc.nl.nbuilds, "dt_r0_c0": stage.dyn.dt / (pot.r0 / pot.c0),
-            "rho0": s.rho0 if s.rho0 else s.material.rho0, "u": s.u, "two_phase": stage.info["two_phase"],
-            "size": list(s.size), "fit_from_r0": (s.fit_from or 0.0) / pot.r0, "slab_r0": s.slab / pot.r0}
+            "rho0": s.rho0, "u": s.u, "two_phase": s.two_phase, "size": list(s.size or ()),
+            "fit_from_r0": (s.fit_from or 0.0) / pot.r0, "slab_r0": s.slab / pot.r0}
 
 
 class ShockScene(SceneDef):
@@ -567,71 +566,72 @@ class ShockScene(SceneDef):
     name = "shock"
     description = "CD piston shock in a block of clusters; D, u, P, rho vs the experimental Hugoniot"
     params = scene_params(PARAMS)
+    setup_class = ShockSetup
 
     def check(self, v):
-        mat = get_material(v["material"])
+        mat = get_material(v.material)
         if mat.curve is None:
-            raise InputError("material", v["material"], "a material with a cold curve: " + ", ".join(CD_MATERIALS))
+            raise InputError("material", v.material, "a material with a cold curve: " + ", ".join(CD_MATERIALS))
         size = self.size(v)
-        text = v["size"] if isinstance(v["size"], str) else "x".join(map(str, size))
+        text = v.size if isinstance(v.size, str) else "x".join(map(str, size))
         if size[0] < MIN_CELLS:
             raise InputError("size", text,
                              f"at least {MIN_CELLS} repeat cells along the shock (the front is fitted over "
                              f"slabs); e.g. {MIN_CELLS}x{size[1]}x{size[2]}")
-        rep = repeat_lengths(v["direction"], v["r0"])
-        need = 2.0 * v["rc"] * v["r0"]
+        rep = repeat_lengths(v.direction, v.r0)
+        need = 2.0 * v.rc * v.r0
         for k in (1, 2):
             if rep[k] * size[k] < need:
                 nmin = int(math.ceil(need / rep[k]))
                 raise InputError("size", text,
                                  f"a periodic cross-section at least 2 rc r0 wide ({nmin} cells across for "
-                                 f"[{v['direction']}], rc = {v['rc']:g}) so that no cluster meets its own image")
-        if v["u_history"] is not None:
-            piston_history(v["u_history"], v["u"])
-        if v["fit_from"] != "auto":
-            travel = 0.8 * size[0] * repeat_lengths(v["direction"], 1.0)[0]     # the run stops there (in r0)
-            if float(v["fit_from"]) >= travel:
-                raise InputError("fit_from", v["fit_from"], f"auto or a front travel below {travel:.4g} r0 (the run "
+                                 f"[{v.direction}], rc = {v.rc:g}) so that no cluster meets its own image")
+        if v.u_history is not None:
+            piston_history(v.u_history, v.u)
+        if v.fit_from != "auto":
+            travel = 0.8 * size[0] * repeat_lengths(v.direction, 1.0)[0]     # the run stops there (in r0)
+            if float(v.fit_from) >= travel:
+                raise InputError("fit_from", v.fit_from, f"auto or a front travel below {travel:.4g} r0 (the run "
                                  f"ends when the front has crossed 0.8 of the {text} sample)")
 
     @staticmethod
     def size(v):
         """The sample's repeat cells (``size=auto`` resolved, :func:`shock_size`)."""
-        return shock_size(v["u"], tuple(v["size"]) if isinstance(v["size"], list) else v["size"], v["direction"],
-                          min_width=inclusion_width(v["inclusion"], v["inclusion_diameter"], v["r0"]))[0]
+        return shock_size(v.u, tuple(v.size) if isinstance(v.size, list) else v.size, v.direction,
+                          min_width=inclusion_width(v.inclusion, v.inclusion_diameter, v.r0))[0]
 
     def setup(self, v, stage):
-        size = v["size"] if isinstance(v["size"], str) else tuple(v["size"])
-        s = build_shock(v["material"], v["u"], v["direction"], size, v["r0"], v["rc"], v["J"], v["noise"],
-                        v["seed"], v["dt_factor"], attraction=v["attraction"], inclusion=v["inclusion"],
-                        inclusion_fraction=v["inclusion_fraction"],
-                        inclusion_diameter=v["inclusion_diameter"], axis=v["axis"], u_history=v["u_history"],
-                        fit_from=v["fit_from"])
-        return s.atoms, s.dyn, shock_info(s)
+        size = v.size if isinstance(v.size, str) else tuple(v.size)
+        s = build_shock(v.material, v.u, v.direction, size, v.r0, v.rc, v.J, v.noise,
+                        v.seed, v.dt_factor, attraction=v.attraction, inclusion=v.inclusion,
+                        inclusion_fraction=v.inclusion_fraction,
+                        inclusion_diameter=v.inclusion_diameter, axis=v.axis, u_history=v.u_history,
+                        fit_from=v.fit_from)
+        return s
 
-    def attach(self, v, stage, atoms, dyn, info):
-        return shock_stage(stage, atoms, dyn, info, get_material(v["material"]), v["frames"])
+    def attach(self, v, stage, setup):
+        return shock_stage(stage, setup, v.frames)
 
     def finish(self, v, stage):
         return shock_summary(stage)
 
     def retry(self, v, stage, exc, attempt):
-        if exc.quantity != "timestep" or attempt > v["dt_retries"]:
+        if exc.quantity != "timestep" or attempt > v.dt_retries:
             return None
-        note = (f"dt factor {v['dt_factor']:g}: stopped at step {exc.step} by the stiffness check (closest pair "
+        note = (f"dt factor {v.dt_factor:g}: stopped at step {exc.step} by the stiffness check (closest pair "
                 f"{exc.particles}, timestep {exc.value:.4g} > limit {exc.limit:.4g})")
-        return {**v, "dt_factor": 0.5 * v["dt_factor"], "_retried": list(v.get("_retried", [])) + [note]}
+        return v.replace(dt_factor=0.5 * v.dt_factor, retried=v.retried + (note,))
 
     def analyse(self, v, summaries):
         sm = summaries[0]
         tracker = ShockTracker.from_state(sm["tracker"])
         state = tracker.result()
         two = sm["two_phase"] or None
-        mat = get_material(v["material"])
+        mat = get_material(v.material)
         q, ref = shock_quantities(state, mat, sm["u"], reference=two is None)
         n, nsteps, t_run = sm["n"], sm["nsteps"], sm["t_run"]
         notes = list(state.notes)
-        for r in v.get("_retried", []):
+        for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         notes.append(f"{n} clusters, {nsteps} steps of {sm['dt_r0_c0']:.4f} r0/c0, "
                      f"{n * nsteps / max(t_run, 1e-9):.3g} particle-steps/s, {sm['nbuilds']} neighbour-list builds")
@@ -639,7 +639,7 @@ class ShockScene(SceneDef):
         a, b = tracker.fit_window()
         x0 = tracker.frames[0]["profile"]["edges"][0]
         notes.append(f"sample {'x'.join(map(str, size))} repeat cells"
-                     + (" (size=auto: the length steady at this u)" if isinstance(v["size"], str) else "")
+                     + (" (size=auto: the length steady at this u)" if isinstance(v.size, str) else "")
                      + f"; front fitted from {(a - x0) / state.width:.0f} to {(b - x0) / state.width:.0f} slabs "
                      f"({state.n_frames} frames)")
         notes.append(f"front fit: rms residual {state.fit_rms / units.um:.3g} um = {state.fit_rms / state.width:.3f} "
@@ -661,13 +661,13 @@ class ShockScene(SceneDef):
                  "rho0_g_cm3": sm["rho0"] / units.g_cm3, "size_used": list(size),
                  "fit_window_slabs": [(a - x0) / state.width, (b - x0) / state.width],
                  "n_fit_frames": state.n_frames, "n_particles": n, "n_steps": nsteps,
-                 "particle_steps": n * nsteps, "timestep_r0_c0": sm["dt_r0_c0"], "dt_factor_used": v["dt_factor"],
-                 "dt_retries_used": len(v.get("_retried", [])), "stepping_time_s": t_run,
+                 "particle_steps": n * nsteps, "timestep_r0_c0": sm["dt_r0_c0"], "dt_factor_used": v.dt_factor,
+                 "dt_retries_used": len(v.retried), "stepping_time_s": t_run,
                  "particle_steps_per_s": n * nsteps / max(t_run, 1e-9)}
         if two is not None:
             extra["two_phase"] = {k: x for k, x in two.items() if k not in ("centres", "diameters")}
             extra["two_phase"]["rho0"] = two["rho0"] / units.g_cm3
-        return q, notes, extra
+        return q, notes, extra, (tracker, state)
 
     def verdict(self, v, summaries, result):
         """``result.steady`` from the front fit; an unsteady run warns with the reasons and a size that
@@ -679,16 +679,15 @@ class ShockScene(SceneDef):
             result.warnings.append(
                 f"shock not steady on {'x'.join(map(str, size))} cells ({'; '.join(x['steady_reasons'])}): D = "
                 f"{result.quantities['D'].value:.4g} km/s is not the steady value; rerun with --set size="
-                f"{suggest_size(v['u'], size, v['direction'])}")
+                f"{suggest_size(v.u, size, v.direction)}")
 
     def report(self, v, summaries, result, out):
         sm = summaries[0]
-        tracker = ShockTracker.from_state(sm["tracker"])
-        state = tracker.result()
-        mat = get_material(v["material"])
+        tracker, state = result.data
+        mat = get_material(v.material)
         ref_P = result.quantities["P"].reference
         png = out / "shock.png"
-        plot_shock(tracker, state, png, f"{mat.name} [{v['direction']}] along {v['axis']}, u = "
+        plot_shock(tracker, state, png, f"{mat.name} [{v.direction}] along {v.axis}, u = "
                    f"{sm['u'] / units.km_s:g} km/s", u=sm["u"], P_ref=ref_P)
         import csv
         front = out / "shock_front.csv"

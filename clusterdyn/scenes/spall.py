@@ -31,6 +31,7 @@ with a Lagrangian stress map):
 
 import csv
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,9 +43,9 @@ from ..build.lattice import SQRT2, lattice_sound_speed
 from ..errors import InputError
 from ..materials import get_material
 from .base import Param, Quantity, register_scene
-from .common import matplotlib_agg, plain_ledger
+from .common import ledger_joules, matplotlib_agg
 from .lifecycle import SceneDef, Stage, scene_params
-from .plate_impact import ImpactRecord, build_impact, impact_info, write_visar_csv
+from .plate_impact import ImpactRecord, ImpactSetup, build_impact, write_visar_csv
 
 #: perfect [100] lattice, uniaxial strain, rc = 1.15: the tension it holds (docs/theory.md 1.8)
 IDEAL_SPALL_100_GPA = 19.2
@@ -90,14 +91,25 @@ def spall_duration(info, duration=None):
     return slow * (info["target"] + 6.0 * info["flyer"]) / cL
 
 
+@dataclass
+class SpallSetup(ImpactSetup):
+    """An :class:`~clusterdyn.scenes.plate_impact.ImpactSetup` with what the spall analysis adds."""
+
+    x0: np.ndarray = None          #: every particle's x at set-up (the material coordinates)
+    target_rows: np.ndarray = None
+    x_flyer_rear: float = 0.0
+    x_target_front: float = 0.0
+    rho0: float = 0.0              #: the target's density at rest
+
+
 class SpallRecord(ImpactRecord):
     """An :class:`~clusterdyn.scenes.plate_impact.ImpactRecord` (slab profiles, VISAR trace) with a
     :class:`~clusterdyn.analysis.spall.LagrangianMap` of sigma_xx in material coordinates (r0 bins)."""
 
-    def __init__(self, atoms, dyn, info):
-        super().__init__(atoms, dyn, info)
-        r0 = info["r0"]
-        self.lmap = LagrangianMap(np.asarray(info["x0"], float), r0, r0 ** 3 / SQRT2)
+    def __init__(self, setup):
+        super().__init__(setup)
+        r0 = setup.r0
+        self.lmap = LagrangianMap(np.asarray(setup.x0, float), r0, r0 ** 3 / SQRT2)
 
     def frame(self, d):
         vir = super().frame(d)
@@ -121,37 +133,37 @@ class SpallScene(SceneDef):
     description = ("thin Al flyer on a thicker target: VISAR trace, pullback, spall strength (c_b and c_L), "
                    "spall plane vs the measured wave speeds, fragments; single crystal vs polycrystal")
     params = scene_params(PARAMS)
+    setup_class = SpallSetup
 
     def check(self, v):
-        if v["target"] <= v["flyer"]:
-            raise InputError("target", v["target"], f"thicker than the flyer ({v['flyer']:g} r0)")
-        if v["sample"] != "single" and v["grain_size"] > 2 * v["flyer"]:
-            raise InputError("grain_size", v["grain_size"], f"at most twice the flyer ({v['flyer']:g} r0)")
-        if v["packing"] is not None:
+        if v.target <= v.flyer:
+            raise InputError("target", v.target, f"thicker than the flyer ({v.flyer:g} r0)")
+        if v.sample != "single" and v.grain_size > 2 * v.flyer:
+            raise InputError("grain_size", v.grain_size, f"at most twice the flyer ({v.flyer:g} r0)")
+        if v.packing is not None:
             from .packing import resolve_packing
-            resolve_packing(v["packing"])            # checked before any work
+            resolve_packing(v.packing)            # checked before any work
 
     def plan(self, v):
-        return ["single", "polycrystal"] if v["sample"] == "both" else [v["sample"]]
+        return ["single", "polycrystal"] if v.sample == "both" else [v.sample]
 
     def setup(self, v, stage):
-        s = build_impact(stage, "Al", v["v"], v["r0"], v["flyer"], v["target"], v["width"], v["grain_size"],
-                         v["d_min"], v["porosity"], v["seed"], v["noise"], v["J"], relax_cycles=v["relax_cycles"],
-                         packing=v["packing"])
+        s = build_impact(stage, "Al", v.v, v.r0, v.flyer, v.target, v.width, v.grain_size,
+                         v.d_min, v.porosity, v.seed, v.noise, v.J, relax_cycles=v.relax_cycles,
+                         packing=v.packing)
         atoms = s["atoms"]
-        info = impact_info(s)
         plate = atoms.arrays["plate"]
         x0 = atoms.positions[:, 0].copy()
-        info.update({"x0": x0, "target_rows": np.nonzero(plate == 1)[0],
-                     "x_flyer_rear": float(x0[plate == 0].min()), "x_target_front": float(x0[plate == 1].min()),
-                     "rho0": _density(atoms, plate == 1, s["width"], s["r0"]),
-                     "nsteps": int(math.ceil(spall_duration(info, v["duration"]) / s["dt"]))})
+        setup = SpallSetup.built(s, x0=x0, target_rows=np.nonzero(plate == 1)[0],
+                                 x_flyer_rear=float(x0[plate == 0].min()), x_target_front=float(x0[plate == 1].min()),
+                                 rho0=_density(atoms, plate == 1, s["width"], s["r0"]))
+        setup.nsteps = int(math.ceil(spall_duration(setup, v.duration) / s["dt"]))
         s["dyn"].start_ledger()
-        return atoms, s["dyn"], info
+        return setup
 
-    def attach(self, v, stage, atoms, dyn, info):
-        rec = SpallRecord(atoms, dyn, info)
-        return Stage(stage, atoms, dyn, int(info["nsteps"]), v["frames"], info, on_frame=rec.frame, analysis=rec,
+    def attach(self, v, stage, setup):
+        rec = SpallRecord(setup)
+        return Stage(stage, setup.atoms, setup.dyn, int(setup.nsteps), v.frames, on_frame=rec.frame, analysis=rec,
                      observers=[(rec.fsv, 5)])
 
     def finish(self, v, stage):
@@ -167,16 +179,18 @@ class SpallScene(SceneDef):
                 "nsteps": stage.nsteps, "t_run": stage.t_run}
 
     def analyse(self, v, summaries):
-        q, notes, extra = {}, [], {}
+        q, notes, extra, analysed = {}, [], {}, []
         for sm in summaries:
-            qq, nn, ex = spall_quantities(sm, v)
+            a = analyse_spall(sm, v)
+            qq, nn, ex = spall_quantities(sm, v, a)
             q.update(qq)
             notes += nn
             extra[sm["name"]] = ex
-        return q, notes, extra
+            analysed.append(a)
+        return q, notes, extra, analysed
 
     def report(self, v, summaries, result, out):
-        files = [plot_spall(summaries, v, out / "spall.png")]
+        files = [plot_spall(summaries, result.data, v, out / "spall.png")]
         for sm in summaries:
             files.append(write_visar_csv(out / f"spall_visar_{sm['name']}.csv", sm))
             files.append(write_lmap_csv(out / f"spall_stress_map_{sm['name']}.csv", sm["lmap"]))
@@ -208,7 +222,7 @@ def analyse_spall(sm, v):
     pb = pullback(sm["fsv_t"], sm["fsv_v"], info["v"], pulse=pulse, c=c0)
     rho0 = info["rho0"]
     ws = wave_speeds(sm["lmap"], info["x_target_front"] - 0.5 * r0 / SQRT2, info["x_rear"] + 0.5 * r0 / SQRT2,
-                     level=v["level"])
+                     level=v.level)
     plane = sm["plane"]
     depth = plane["scab_fraction"] * Lt if plane["spalled"] else float("nan")
     ring, T = (ring_thickness(sm["fsv_t"], sm["fsv_v"], pb["t_signal"], cL) if pb["spall_signal"]
@@ -223,13 +237,14 @@ def analyse_spall(sm, v):
             "ring_T": T, "max_tension": tension, "max_compression": compression, "material": mat}
 
 
-def spall_quantities(sm, v):
-    """``(quantities, notes, extra)`` of one stage."""
-    a = analyse_spall(sm, v)
+def spall_quantities(sm, v, a=None):
+    """``(quantities, notes, extra)`` of one stage (``a``: its :func:`analyse_spall`, made when not given)."""
+    a = analyse_spall(sm, v) if a is None else a
     info, pb, ws, plane = sm["info"], a["pullback"], a["waves"], sm["plane"]
     p = "sc_" if sm["name"] == "single" else "pc_"
     r0 = info["r0"]
     L = sm["ledger"]
+    LJ = ledger_joules(L)
     lo, hi = MEASURED_AL_SPALL_GPA
     ideal = IDEAL_SPALL_100_GPA if sm["name"] == "single" else None
     measured = 0.5 * (lo + hi) if sm["name"] != "single" else None
@@ -240,51 +255,77 @@ def spall_quantities(sm, v):
                                 note="first free-surface maximum vs the impact speed"),
         p + "fsv_min": Quantity(pb["u_min"] / units.m_s, "m/s", note="minimum before the velocity rises again"),
         p + "pullback": Quantity(pb["du"] / units.m_s, "m/s", note="u_max - u_min"),
-        p + "spall_strength_cb": Quantity(a["sigma_cb"] / units.GPa, "GPa", measured,
-                                          note=f"rho0 c_b du / 2, c_b = c0 = {a['c_b'] / units.km_s:.3f} km/s, "
-                                               f"rho0 = {a['rho0'] / units.g_cm3:.4f} g/cm3"
-                                               + (f"; vs measured Al {lo:g}-{hi:g} GPa" if measured else "")),
-        p + "spall_strength_cL": Quantity(a["sigma_cL"] / units.GPa, "GPa", ideal,
-                                          note=f"rho0 c_L du / 2, c_L = sqrt(3/2) c0 = {a['c_L'] / units.km_s:.3f} "
-                                               "km/s ([100] lattice)"
-                                               + ("; vs the perfect [100] lattice in uniaxial strain" if ideal else "")),
+        **_strengths(p, a, bool(plane["spalled"]), measured, ideal, lo, hi),
         p + "max_tension": Quantity(a["max_tension"] / units.GPa, "GPa", ideal,
                                     note="largest sigma_xx (tension) of any 2 r0 slab over the run"),
         p + "max_compression": Quantity(a["max_compression"] / units.GPa, "GPa",
                                         note="largest -sigma_xx of any 2 r0 slab over the run"),
         p + "strain_rate": Quantity(pb["strain_rate"] * units.s, "1/s",
                                     note="unloading: -(du_fs/dt)/(2 c_b) between 20% and 80% of the drop"),
-        p + "spall_depth": Quantity(a["depth"] / r0, "r0", ws["d_expected"] / r0,
+        p + "spall_depth": Quantity(a["depth"] / r0, "r0", _finite(ws["d_expected"] / r0),
                                     note="scab thickness (its share of the target's clusters x target) vs where "
                                          "the releases cross (measured speeds)"),
-        p + "ring_depth": Quantity(a["ring"] / r0, "r0", a["depth"] / r0 if math.isfinite(a["depth"]) else None,
+        p + "ring_depth": Quantity(a["ring"] / r0, "r0", _finite(a["depth"] / r0),
                                    note=f"c_L T / 2 from the VISAR ringing, T = {a['ring_T'] / units.ns:.4g} ns, "
                                         "vs the scab"),
         p + "D": Quantity(ws["D"] / units.km_s, "km/s", note="shock speed (half amplitude), material coordinates"),
         p + "c_release_forward": Quantity(ws["c_forward"] / units.km_s, "km/s",
-                                          note=f"release from the flyer's rear, at {v['level']:g} of the pulse"),
+                                          note=f"release from the flyer's rear, at {v.level:g} of the pulse"),
         p + "c_release_backward": Quantity(ws["c_backward"] / units.km_s, "km/s",
                                            note="release reflected from the target's rear face"),
         p + "target_fragments": Quantity(plane["n_target_fragments"], "", note="fragments of the target at the end"),
         p + "ledger_residual": Quantity(L["residual"] / L["energy_in"], "",
                                         note="energy ledger residual / initial kinetic energy"),
     }
-    notes = [f"{sm['name']}: {sm['n']} clusters, {sm['nsteps']} steps, {sm['t_run']:.1f} s stepping; flyer "
+    notes = []
+    for key, why in ((p + "spall_depth", "no scab (the target did not spall)"),
+                     (p + "ring_depth", "no ringing after a spall signal in the free-surface velocity")):
+        if not math.isfinite(q[key].value):
+            del q[key]
+            notes.append(f"{key}: not measured: {why}")
+    notes += [f"{sm['name']}: {sm['n']} clusters, {sm['nsteps']} steps, {sm['t_run']:.1f} s stepping; flyer "
              f"{info['flyer'] / r0:g} r0, target {info['target'] / r0:g} r0 (acoustic spall plane: "
              f"{info['flyer'] / r0:g} r0 from the rear face); largest target fragments "
              f"{plane['largest_target_fragments']}",
              f"{sm['name']}: waves in material coordinates: D {ws['D'] / units.km_s:.3f} km/s, releases at "
-             f"{v['level']:g} of the pulse {ws['c_forward'] / units.km_s:.3f} / {ws['c_backward'] / units.km_s:.3f} km/s "
-             f"({ws['n_forward']} / {ws['n_backward']} frames), crossing at {ws['d_expected'] / r0:.2f} r0 from the "
-             f"rear face, t = {ws['t_cross'] / units.ns:.1f} ns",
+             f"{v.level:g} of the pulse {ws['c_forward'] / units.km_s:.3f} / {ws['c_backward'] / units.km_s:.3f} km/s "
+             f"({ws['n_forward']} / {ws['n_backward']} frames), " + _crossing(ws, r0),
              f"{sm['name']}: perfect [100] lattice in uniaxial strain holds {IDEAL_SPALL_100_GPA} GPa; measured "
              f"aluminium {lo:g}-{hi:g} GPa at 1e5-1e6 /s",
-             f"{sm['name']}: energy ledger (eV): kinetic {L['kinetic']:.6g}, potential {L['potential']:.6g}, damping "
-             f"loss {L['damping_loss']:.6g}, energy in {L['energy_in']:.6g}, residual {L['residual']:.3g}"]
-    ex = {"ledger_eV": plain_ledger(L), "pullback": {k: _num(x) for k, x in pb.items()},
+             f"{sm['name']}: energy ledger (J): kinetic {LJ['kinetic']:.6g}, potential {LJ['potential']:.6g}, damping "
+             f"loss {LJ['damping_loss']:.6g}, energy in {LJ['energy_in']:.6g}, residual {LJ['residual']:.3g}"]
+    ex = {"ledger_J": LJ, "pullback": {k: _num(x) for k, x in pb.items()},
           "waves": {k: _num(x) for k, x in ws.items()}, "plane": plane,
           "spectrum": {"g": sm["spectrum_g"].tolist(), "N": sm["spectrum_n"].tolist()}}
     return q, notes, ex
+
+
+def _finite(x):
+    return x if math.isfinite(x) else None
+
+
+def _crossing(ws, r0):
+    """Where the two releases cross (or why there is no such point)."""
+    if math.isfinite(ws["d_expected"]) and math.isfinite(ws["t_cross"]):
+        return f"crossing at {ws['d_expected'] / r0:.2f} r0 from the rear face, t = {ws['t_cross'] / units.ns:.1f} ns"
+    return "no crossing point: a release speed was not measured (too few frames above the level)"
+
+
+def _strengths(p, a, spalled, measured, ideal, lo, hi):
+    """The pullback strengths: spall strengths when the target spalled, else the tension it held (a lower
+    bound of its spall strength), under keys that say so."""
+    name, what = ("spall_strength", "") if spalled else ("tension_held", "no spall: the tension the target held, "
+                                                         "a lower bound of its spall strength; ")
+    return {
+        p + name + "_cb": Quantity(a["sigma_cb"] / units.GPa, "GPa", measured,
+                                   note=f"{what}rho0 c_b du / 2, c_b = c0 = {a['c_b'] / units.km_s:.3f} km/s, "
+                                        f"rho0 = {a['rho0'] / units.g_cm3:.4f} g/cm3"
+                                        + (f"; vs measured Al {lo:g}-{hi:g} GPa" if measured else "")),
+        p + name + "_cL": Quantity(a["sigma_cL"] / units.GPa, "GPa", ideal,
+                                   note=f"{what}rho0 c_L du / 2, c_L = sqrt(3/2) c0 = {a['c_L'] / units.km_s:.3f} "
+                                        "km/s ([100] lattice)"
+                                        + ("; vs the perfect [100] lattice in uniaxial strain" if ideal else "")),
+    }
 
 
 def _num(x):
@@ -301,13 +342,13 @@ def write_lmap_csv(path, lmap):
     return path
 
 
-def plot_spall(summaries, v, path):
-    """VISAR traces with the pullback, the stress maps with the fitted waves, the fragment spectra."""
+def plot_spall(summaries, analysed, v, path):
+    """VISAR traces with the pullback, the stress maps with the fitted waves, the fragment spectra
+    (``analysed``: each stage's :func:`analyse_spall`)."""
     plt = matplotlib_agg()
     n = len(summaries)
     fig, axs = plt.subplots(n, 3, figsize=(16, 4.3 * n), squeeze=False)
-    for row, sm in enumerate(summaries):
-        a = analyse_spall(sm, v)
+    for row, (sm, a) in enumerate(zip(summaries, analysed)):
         info, pb, ws = sm["info"], a["pullback"], a["waves"]
         r0 = info["r0"]
         ax = axs[row, 0]

@@ -157,33 +157,33 @@ MCA_ACROSS = 8
 # --------------------------------------------------------------------------- set-up
 def taylor_packing(v, r0):
     """(porosity, grain size, rc, boundaries, notes) of a parameter set at cluster size ``r0``."""
-    if v["packing"] in PACKINGS:
-        pk = PACKINGS[v["packing"]]
+    if v.packing in PACKINGS:
+        pk = PACKINGS[v.packing]
     else:                       # a preset or file of clusterdyn.scenes.packing (grain size in r0)
         from .packing import resolve_packing
-        spec = resolve_packing(v["packing"])
+        spec = resolve_packing(v.packing)
         pk = {"porosity": spec["porosity"], "grain_size": spec["grain_size"] * r0, "rc": spec["rc"],
               "boundaries": spec["boundaries"]}
-    por = pk["porosity"] if v["porosity"] is None else v["porosity"]
-    rc = pk["rc"] if v["rc"] is None else v["rc"]
-    bnd = pk["boundaries"] if v.get("boundaries") is None else v["boundaries"]
+    por = pk["porosity"] if v.porosity is None else v.porosity
+    rc = pk["rc"] if v.rc is None else v.rc
+    bnd = pk["boundaries"] if v.get("boundaries") is None else v.boundaries
     notes = []
-    if v["grain_size"] is None:
+    if v.grain_size is None:
         g = pk["grain_size"]
         if g < MIN_GRAIN_R0 * r0:
-            notes.append(f"grain size {g / units.mm:.3g} mm of the '{v['packing']}' packing is below "
+            notes.append(f"grain size {g / units.mm:.3g} mm of the '{v.packing}' packing is below "
                          f"{MIN_GRAIN_R0:g} r0 at r0 = {r0 / units.mm:.4g} mm: grains of {MIN_GRAIN_R0:g} r0 = "
                          f"{MIN_GRAIN_R0 * r0 / units.mm:.3g} mm used")
             g = MIN_GRAIN_R0 * r0
     else:
-        g = v["grain_size"]
+        g = v.grain_size
     return por, g, rc, bnd, notes
 
 
 def taylor_r0(v):
-    if v["r0"] is not None:
-        return v["r0"]
-    return v["D0"] / (MCA_ACROSS if v.get("method") == "mca" else DEFAULT_ACROSS)
+    if v.r0 is not None:
+        return v.r0
+    return v.D0 / (MCA_ACROSS if v.get("method") == "mca" else DEFAULT_ACROSS)
 
 
 def build_taylor_mca(v):
@@ -198,10 +198,10 @@ def build_taylor_mca(v):
     from ..build.shapes import Cylinder
     from ..mca import MCA, MCADynamics
     from ..mca.dynamics import COURANT, default_timestep, wave_speeds
-    mat = get_material(v["mca_material"])
-    D0, L0, V = v["D0"], v["L0"], v["V"]
+    mat = get_material(v.mca_material)
+    D0, L0, V = v.D0, v.L0, v.V
     d = taylor_r0(v)
-    ax = parse_axis(v["axis"])
+    ax = parse_axis(v.axis)
     center = np.full(3, 0.5 * D0 + d)
     center[ax] = 0.0
     atoms = mca_packing(mat, d, Cylinder(center=tuple(center), radius=0.5 * D0, length=L0, axis=ax), "fcc")
@@ -215,20 +215,20 @@ def build_taylor_mca(v):
     normal[ax] = 1.0
     point = np.zeros(3)
     point[ax] = z.min() - 0.5 * d - 0.01 * d        # d_c = d/2: the end automata just touch
-    wall = Wall(point, normal, sticking=v["wall"] == "sticking")
+    wall = Wall(point, normal, sticking=v.wall == "sticking")
     atoms.set_constraint(wall)
     cl = wave_speeds(mat)[0]
-    dt = default_timestep(atoms) * (v["dt_factor"] / TIMESTEP_FACTOR) * cl / (cl + V)
-    dyn = MCADynamics(atoms, timestep=dt, damping=v["mca_damping"], remesh_strain=v["remesh_strain"])
+    dt = default_timestep(atoms) * (v.dt_factor / TIMESTEP_FACTOR) * cl / (cl + V)
+    dyn = MCADynamics(atoms, timestep=dt, damping=v.mca_damping, remesh_strain=v.remesh_strain)
     rho = float(atoms.get_masses().sum() / (math.pi * 0.25 * D0 ** 2 * L0))
-    t_max = v["t_max"]
+    t_max = v.t_max
     if t_max is None:
         t_max = 2.0 * rho * V * L0 / T_MAX_YIELD + 20.0 * L0 / cl
     announce_cost("taylor", len(atoms), int(math.ceil(t_max / dt)))
     info = {"method": "mca", "r0": d, "L0": L0, "D0": D0, "V": V, "axis": ax, "dt": dt,
             "nsteps": int(math.ceil(t_max / dt)), "t_max": t_max, "wall_z": float(point[ax]), "L_init": L_init,
             "offset": offset, "outline_noise": noise_outline, "rho": rho, "rho0": float(mat.rho0), "c0": cl,
-            "courant": COURANT * float(v["dt_factor"] / TIMESTEP_FACTOR), "material": mat.name,
+            "courant": COURANT * float(v.dt_factor / TIMESTEP_FACTOR), "material": mat.name,
             "notes": [], "n_automata": len(atoms)}
     return atoms, dyn, info
 
@@ -267,22 +267,22 @@ def _rest_outline(atoms, ax, size, D0):
 
 def build_taylor(v):
     """The relaxed rod, its wall and dynamics; returns ``(atoms, dyn, info)`` (lifecycle set-up)."""
-    mat = get_material(v["material"])
-    D0, L0, V = v["D0"], v["L0"], v["V"]
+    mat = get_material(v.material)
+    D0, L0, V = v.D0, v.L0, v.V
     r0 = taylor_r0(v)
-    ax = parse_axis(v["axis"])
+    ax = parse_axis(v.axis)
     por, grain, rc, bnd, notes = taylor_packing(v, r0)
     center = np.zeros(3)
     center[ax] = 0.5 * L0
-    atoms = rod(mat, r0, L0, D0, axis=ax, center=center, grain_size=grain, seed=v["seed"],
-                target_porosity=por, mass=v["mass"])
+    atoms = rod(mat, r0, L0, D0, axis=ax, center=center, grain_size=grain, seed=v.seed,
+                target_porosity=por, mass=v.mass)
     body = dict(atoms.info["bodies"][0])
     term = None
     if bnd == "law":            # the boundary law (clusterdyn.scenes.packing), quenched with its bonds held
         from .packing import prepare, resolve_packing
-        calc, term, relax = prepare(atoms, resolve_packing(v["packing"]), rc,
-                                    (lambda a, t: relax_sample(a, cycles=v["relax_cycles"], lateral=False, term=t))
-                                    if v["relax_cycles"] else None)
+        calc, term, relax = prepare(atoms, resolve_packing(v.packing), rc,
+                                    (lambda a, t: relax_sample(a, cycles=v.relax_cycles, lateral=False, term=t))
+                                    if v.relax_cycles else None)
     elif bnd == "repulsive":
         mark_initial_bonds(atoms, rc=rc, within="grain")
         calc = ClusterDynamics(rc=rc, attraction="initial")
@@ -290,7 +290,7 @@ def build_taylor(v):
         calc = ClusterDynamics(rc=rc)
     atoms.calc = calc
     if term is None:
-        relax = relax_sample(atoms, cycles=v["relax_cycles"], lateral=False) if v["relax_cycles"] else None
+        relax = relax_sample(atoms, cycles=v.relax_cycles, lateral=False) if v.relax_cycles else None
     if relax is None:
         atoms.get_forces()            # relax_cycles=0: the calculator's set-up (its potentials) all the same
     atoms.set_momenta(np.zeros((len(atoms), 3)))
@@ -302,20 +302,20 @@ def build_taylor(v):
     vel = np.zeros(3)
     vel[ax] = -V
     atoms.set_velocities(np.broadcast_to(vel, (len(atoms), 3)).copy())
-    thermal_noise(atoms, v["noise"], v["seed"])
+    thermal_noise(atoms, v.noise, v.seed)
     normal = np.zeros(3)
     normal[ax] = 1.0
     point = np.zeros(3)
     point[ax] = z.min() - 0.5 * r0 - 0.01 * r0       # d_c = r0/2: the end clusters just touch
-    wall = Wall(point, normal, sticking=v["wall"] == "sticking")
+    wall = Wall(point, normal, sticking=v.wall == "sticking")
     atoms.set_constraint(wall)
-    dt = v["dt_factor"] * r0 / (pot.c0 + V)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+    dt = v.dt_factor * r0 / (pot.c0 + V)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v.J)
     if term is not None:
         dyn.attach_piece(term)
     dyn.start_ledger()
     rho = float(atoms.get_masses().sum() / (math.pi * 0.25 * D0 ** 2 * L0))
-    t_max = v["t_max"]
+    t_max = v.t_max
     if t_max is None:
         t_max = 2.0 * rho * V * L0 / T_MAX_YIELD + 20.0 * L0 / pot.c0
     announce_cost("taylor", len(atoms), int(math.ceil(t_max / dt)))
@@ -407,6 +407,20 @@ def analyse_rod(sm):
     return m
 
 
+def _unmeasured(q, m):
+    """Drop the rod measures that could not be taken (no undeformed rear: X = 0, so no Taylor estimate);
+    return one note each saying why."""
+    notes = []
+    if not m["X"] > 0:
+        del q["X_over_L0"], q["Y_taylor"]
+        notes.append("X_over_L0, Y_taylor: not measured: no part of the rod's rear keeps its radius within 2% of "
+                     "D0/2 (X = 0), and Taylor's estimate needs ln(L0/X)")
+    elif not math.isfinite(m["Y"]):
+        del q["Y_taylor"]
+        notes.append("Y_taylor: not measured: Taylor's estimate is undefined for this rod (Lf = L0 or X = L0)")
+    return notes
+
+
 class TaylorScene(SceneDef):
     """The ``taylor`` scene on the lifecycle (module docstring)."""
 
@@ -417,28 +431,28 @@ class TaylorScene(SceneDef):
 
     def check(self, v):
         r0 = taylor_r0(v)
-        if v["method"] == "mca":
-            if v["D0"] < 4.0 * r0:
-                raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v['D0'] / 4 / units.mm:g} mm "
+        if v.method == "mca":
+            if v.D0 < 4.0 * r0:
+                raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v.D0 / 4 / units.mm:g} mm "
                                  "(a rod a few automata across)")
-            if v["L0"] < 4.0 * r0:
-                raise InputError("L0", f"{v['L0'] / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
+            if v.L0 < 4.0 * r0:
+                raise InputError("L0", f"{v.L0 / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
             return
-        if v["D0"] < 4.0 * r0:
-            raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v['D0'] / 4 / units.mm:g} mm "
+        if v.D0 < 4.0 * r0:
+            raise InputError("r0", f"{r0 / units.mm:g}mm", f"at most D0/4 = {v.D0 / 4 / units.mm:g} mm "
                              "(a rod a few clusters across)")
-        if v["L0"] < 4.0 * r0:
-            raise InputError("L0", f"{v['L0'] / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
+        if v.L0 < 4.0 * r0:
+            raise InputError("L0", f"{v.L0 / units.mm:g}mm", f"at least 4 r0 = {4 * r0 / units.mm:g} mm")
         por, g, rc, bnd, _ = taylor_packing(v, r0)
         if g < 3.0 * r0:
             raise InputError("grain_size", f"{g / units.mm:g}mm", f"at least 3 r0 = {3 * r0 / units.mm:.4g} mm "
                              "(the smallest grain of the polycrystal builder)")
-        if g > min(v["D0"], v["L0"]):
+        if g > min(v.D0, v.L0):
             raise InputError("grain_size", f"{g / units.mm:g}mm", f"at most the rod's diameter and length, "
-                             f"{min(v['D0'], v['L0']) / units.mm:g} mm")
+                             f"{min(v.D0, v.L0) / units.mm:g} mm")
 
     def setup(self, v, stage):
-        return build_taylor_mca(v) if v["method"] == "mca" else build_taylor(v)
+        return build_taylor_mca(v) if v.method == "mca" else build_taylor(v)
 
     def attach(self, v, stage, atoms, dyn, info):
         rec = TaylorRecord(atoms, dyn, info)
@@ -501,7 +515,7 @@ class TaylorScene(SceneDef):
                                   "at the end (negative: rebound)")
         lq, lnote = ledger_quantities(sm["ledger"])
         q.update(lq)
-        notes = []
+        notes = _unmeasured(q, m)
         notes += list(info["notes"])
         mca = info.get("method") == "mca"
         if mca:
@@ -518,8 +532,8 @@ class TaylorScene(SceneDef):
                      f"{100 * STOP_LENGTH:g}% over {STOP_WINDOW / units.us:g} us)")
         if mca:
             notes.append(f"MCA rod: {sm['n']} automata of {info['r0'] / units.mm:.4g} mm = D0/{D0 / info['r0']:.3g} "
-                         f"(fcc), {info['material']}, pair damping {v['mca_damping']:g}, switching at pair strain "
-                         f"{v['remesh_strain']:g} ({sm['ledger']['switches']} switches), wall {v['wall']} "
+                         f"(fcc), {info['material']}, pair damping {v.mca_damping:g}, switching at pair strain "
+                         f"{v.remesh_strain:g} ({sm['ledger']['switches']} switches), wall {v.wall} "
                          f"(MCA default stiffness); the CD packing parameters do not apply")
         else:
             body = info["body"]
@@ -528,7 +542,7 @@ class TaylorScene(SceneDef):
                      f"{info['grain_size'] / info['r0']:.3g} r0, porosity {100 * body['porosity']:.1f}% "
                      f"(d_min {body['d_min_r0']:.3f} r0), rc {info['rc']:g}, {info.get('boundaries', 'bonded')} grain "
                      f"boundaries, masses '{body['mass_choice']}' "
-                     f"(density {info['rho'] / units.g_cm3:.3f} g/cm3), wall {v['wall']}, J {v['J']}")
+                     f"(density {info['rho'] / units.g_cm3:.3f} g/cm3), wall {v.wall}, J {v.J}")
         if not mca:
             notes.append(f"relaxed at rest ({info['relax_steps']} steps): length {info['L_init'] / units.mm:.4g} mm "
                      f"(nominal {L0 / units.mm:g}); outline offset {info['offset'] / info['r0']:+.3f} r0, outline "
@@ -541,18 +555,18 @@ class TaylorScene(SceneDef):
         else:
             notes.append("no room-temperature test with this L0, D0 and V in the data: no reference")
         notes.append(lnote)
-        for r in v.get("_retried", []):
+        for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         extra = {"Lf_mm": m["Lf"] / units.mm, "X_mm": m["X"] / units.mm, "Df_mm": m["Df"] / units.mm,
                  "W_mm": m["W"] / units.mm, "test": None if test is None else test["name"],
                  "ledger_J": sm["ledger"], "wall_impulse_N_s": sm["impulse_N_s"], "n_clusters": sm["n"],
                  "steps": sm["steps"], "stepping_time_s": sm["t_run"], "stopped": bool(sm["reason"])}
-        return q, notes, extra
+        return q, notes, extra, m
 
     def report(self, v, summaries, result, out):
         sm = summaries[0]
         info = sm["info"]
-        m = analyse_rod(sm)
+        m = result.data
         test = find_taylor_test(info["L0"], info["D0"], info["V"])
         outline = taylor_outline(test["name"]) if test is not None and test["has_outline"] else None
         files = write_outline(out, m, info, outline, test)

@@ -30,7 +30,7 @@ class ListParam(Param):
 
     def describe(self):
         d = "none" if self.default is None else ",".join(f"{x:g}" for x in self.default)
-        return f"{self.name} = {d}{' ' + self.unit if self.unit else ''}  -- {self.doc}"
+        return f"{self.name} = {d}{' ' + self.unit if self.unit and self.default is not None else ''}  -- {self.doc}"
 
     def parse(self, value):
         if value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off", "")):
@@ -235,7 +235,8 @@ def run_key(scene, params):
 
 def run_folder(cache, scene, overrides):
     """``cache/<scene>-<12 hex digits>``: one folder per parameter set (hash of :func:`run_key`)."""
-    key = run_key(scene, scene.display(scene.parse(overrides)))
+    from ..scenes.base import display_text
+    key = run_key(scene, scene.display(scene.parse(display_text(scene, overrides))))
     h = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
     return Path(cache) / f"{scene.name}-{h}"
 
@@ -252,6 +253,8 @@ def run_scene(scene, overrides, progress=False, desc=None, folder=None, reuse=Tr
     studies sharing a cache share their runs.
     """
     from ..errors import InstabilityError
+    from ..scenes.base import display_text
+    overrides = display_text(scene, overrides)      # a study's numbers are in display units
     params = _jsonable(scene.display(scene.parse(overrides)))
     if folder is None and cache is not None:
         folder = run_folder(cache, scene, overrides)
@@ -354,7 +357,8 @@ class StudyPoint:
         return self._def.defaults()
 
     def parse(self, overrides):
-        return self._def.parse(overrides)
+        from ..scenes.base import display_text
+        return self._def.parse(display_text(self._def, overrides))
 
     def display(self, vals):
         return self._def.display(vals)

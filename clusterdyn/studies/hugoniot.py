@@ -42,7 +42,7 @@ from ..build.two_phase import PAPER_CASES
 from ..errors import InputError
 from ..materials import get_material, hugoniot
 from ..scenes import get_scene
-from ..scenes.base import Param
+from ..scenes.base import Param, display_text
 from ..scenes.shock import CD_MATERIALS, U_MAX, ShockScene, cold_shock_state
 from .base import Report, Study, register_study
 from .common import ListParam, format_table, markdown_table, shock_row, write_csv
@@ -240,10 +240,10 @@ class HugoniotStudy(Study):
     def _run_row(run, ov):
         scene = get_scene("shock")
         res, err, wall = run.run_scene(scene, ov)
-        pv = scene.display(scene.parse(ov))
+        pv = scene.display(scene.parse(display_text(scene, ov)))     # the sweep's numbers: display units
         # the sample that ran (size=auto resolved)
         pv["size"] = tuple(res.extra["size_used"]) if res is not None and "size_used" in res.extra else \
-            tuple(ShockScene.size(scene.parse(ov)))
+            tuple(ShockScene.size(scene.parse(display_text(scene, ov))))
         return res, shock_row(res, err, wall), pv
 
     def collect(self, run, plan):
