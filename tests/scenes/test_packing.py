@@ -44,3 +44,33 @@ def test_tiny_spall_with_a_weak_law_pulls_back_less(tmp_path):
 def test_taylor_refuses_an_unknown_packing():
     with pytest.raises(InputError, match="packing"):
         get_scene("taylor").run({"packing": "no-such", "r0": "1.27mm"}, progress=False)
+
+
+def test_hypervelocity_takes_the_packing_and_lammps_refuses_the_law(tmp_path):
+    """packing=FILE: plate and sphere are polycrystals of the packing, quenched apart, then the
+    sphere set flying at START_GAP; the law's term rides on the dynamics.  The LAMMPS engine refuses
+    the law in one line before any work."""
+    from clusterdyn import units
+    from clusterdyn.cli import main
+    from clusterdyn.scenes.hypervelocity import START_GAP, build_hypervelocity
+    scene = get_scene("hypervelocity")
+    small = {"r0": "0.6mm", "radius": "5mm", "diameter": "4.5mm", "noise": "0"}
+    f = tmp_path / "law.json"
+    f.write_text(json.dumps({"grain_size": 4, "porosity": 0.14, "rc": 1.15, "boundaries": "law",
+                             "law": {"sigma_t": 2.0, "ductility": 8.0, "select": "all"}}))
+    v = scene.parse({**small, "packing": str(f)})
+    scene.check(v)
+    atoms, dyn, info = build_hypervelocity(v)
+    assert [q.name for q in dyn.pieces if q.adds_forces] == ["boundary"]
+    body, r0 = atoms.arrays["body"], 0.6 * units.mm
+    assert len(np.unique(atoms.arrays["grain"][body == 0])) > 1 and len(np.unique(atoms.arrays["grain"][body == 1])) > 1
+    vz = atoms.get_velocities()[:, 2]
+    assert np.allclose(vz[body == 1], -6.7 * units.km_s) and np.all(vz[body == 0] == 0)
+    z, rad = atoms.positions[:, 2], atoms.arrays["radius"]
+    gap = (z - rad)[body == 1].min() - (z + rad)[body == 0].max()
+    assert abs(gap - START_GAP * r0) < 1e-9 * r0
+    assert any("boundary law" in n for n in info["packing_notes"])
+    out = tmp_path / "law"
+    argv = ["run", "hypervelocity", "--engine", "lammps", "--deck-only", "--set", "packing=6061-T6", "--out", str(out)]
+    assert main(argv) == 2
+    assert not out.exists() or not any(out.iterdir())
