@@ -78,6 +78,7 @@ from ..analysis.ejecta import (BREAKOUT_FRACTION, FS_LAYER, G_TIP, MARGIN, Eject
                                spectrum_table)
 from ..analysis.fragment_spectra import G_MAX
 from ..analysis.shock import hugoniot_interpolant
+from ..analysis.stress import add_piece_virials
 from ..build import fcc_packing, along_axis, parse_axis, repeat_lengths
 from ..build.bodies import crystal_rotation, plane_spacing
 from ..build.lattice import ORIENTATIONS, lattice_sound_speed, parse_direction
@@ -365,7 +366,8 @@ class ProfiledShockScene(SceneDef):
 
         def probe_obs():
             if not probe.done:
-                probe.sample(dyn.get_time(), atoms, calc.compute(atoms, per_particle=True, forces=False)["virials"])
+                probe.sample(dyn.get_time(), atoms,
+                             add_piece_virials(calc.compute(atoms, per_particle=True, forces=False)["virials"], dyn))
 
         def frame(d):
             rec.add(d.get_time(), atoms)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import units
 from ..analysis.shock import ShockTracker
+from ..analysis.stress import add_piece_virials
 from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
 from ..build.lattice import lattice_sound_speed
 from ..build.two_phase import rest_volumes, two_phase
@@ -538,8 +539,8 @@ def shock_stage(name, atoms, dyn, info, material, frames):
     ax = setup.axis
 
     def frame(d):
-        out = calc.compute(atoms, per_particle=True, forces=False)
-        tracker.add(d.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
+        W = add_piece_virials(calc.compute(atoms, per_particle=True, forces=False)["virials"], dyn)
+        tracker.add(d.get_time(), atoms, W, atoms.positions[mask, ax].max(), exclude=mask)
 
     others = [k for k in range(3) if k != ax]
     area = atoms.cell[others[0], others[0]] * atoms.cell[others[1], others[1]]

@@ -22,6 +22,15 @@ def test_impact_plates_with_the_law_attach_the_term_and_keep_the_default(tmp_pat
     s = build_impact(packing=_law_file(tmp_path), **kw)
     assert [q.name for q in s["dyn"].pieces if q.adds_forces] == ["boundary"]
     assert s["relax"]["boundary"]["bonds"] > 0
+    # the scenes' stress maps (spall, plate-impact) carry the law's pair stresses
+    from clusterdyn.analysis.stress import particle_virials
+    from clusterdyn.scenes.plate_impact import ImpactRecord
+    dyn, atoms = s["dyn"], s["atoms"]
+    dyn.run(3)
+    term = next(q for q in dyn.pieces if q.adds_forces)
+    W = ImpactRecord(atoms, dyn, {"r0": s["r0"], "v": s["v"], "rear": np.flatnonzero(s["rear"])}).frame(dyn)
+    total = particle_virials(atoms).sum(axis=0) + term.virial
+    assert np.allclose(W.sum(axis=0), total, rtol=1e-10, atol=1e-10 * np.abs(total).max())
     plain = build_impact(**kw)
     assert not any(q.adds_forces for q in plain["dyn"].pieces)
     assert plain["calc"].parameters["attraction"] == "all"
@@ -33,8 +42,7 @@ def test_tiny_spall_with_a_weak_law_pulls_back_less(tmp_path):
     weak = get_scene("spall").run({**common, "packing": _law_file(tmp_path)}, out=tmp_path / "w", progress=False)
     paper = get_scene("spall").run(common, out=tmp_path / "p", progress=False)
     qw, qp = weak.quantities, paper.quantities
-    # the pullback (free-surface velocity: the law's forces are in it; its pair stresses are not in the
-    # scenes' stress maps, docs/polycrystal.md)
+    # the pullback (free-surface velocity: the law's forces are in it)
     print(qw["pc_spall_strength_cb"].value, qp["pc_spall_strength_cb"].value, qw["pc_ledger_residual"].value)
     assert qp["pc_spall_strength_cb"].value > 1.0                     # GPa: the paper's packing holds tension
     assert qw["pc_spall_strength_cb"].value < 0.5 * qp["pc_spall_strength_cb"].value   # the law's weak bonds do not
