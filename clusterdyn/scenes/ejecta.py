@@ -306,8 +306,14 @@ class ProfiledShockScene(SceneDef):
         else:
             atoms = profiled_sample(mat, r0, prof, depth=depth, width=width, axis=ax, direction=_dir_key(v), dims=2,
                                     slab_cells=v["slab_cells"])
-        calc = ClusterDynamics(rc=v["rc"])
-        atoms.calc = calc
+        term = None
+        if v.get("packing") is None:
+            calc = ClusterDynamics(rc=v["rc"])
+            atoms.calc = calc
+        else:                   # the law on every set-up pair of the lattice (at rest: no quench)
+            from ..md.boundary import apply_boundary_law
+            from .packing import law_of, resolve_packing
+            calc, term = apply_boundary_law(atoms, law_of(resolve_packing(v["packing"])), rc=v["rc"])
         calc.setup(atoms)
         mask = piston_layer(atoms, piston_thickness(r0), ax)
         e = np.zeros(3)
@@ -321,6 +327,8 @@ class ProfiledShockScene(SceneDef):
         atoms.set_momenta(atoms.get_momenta())
         dt = shock_timestep(calc, u, v["dt_factor"])
         dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+        if term is not None:
+            dyn.attach_piece(term)
         x = atoms.positions[:, ax]
         p = atoms.info["profile"]
         iu = (ax + 1) % 3
@@ -581,6 +589,9 @@ EJECTA_PARAMS = [
           optional=True),
     Param("corrections", False, "apply the paper's two spectrum corrections (no particles under 10 um, then "
           "every size +5 um) to the reported size distribution", kind="bool"),
+    Param("packing", None, "the boundary pair law on every pair of the slab: a packing preset or JSON file "
+          "(clusterdyn.scenes.packing) with boundaries=law and select=all (the slab stays a single crystal: the "
+          "packing's grain size and porosity are not built); none = the paper's model", kind="str", optional=True),
 ]
 
 
@@ -615,6 +626,12 @@ class EjectaScene(ProfiledShockScene):
 
     def check(self, v):
         super().check(v)
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            spec = resolve_packing(v["packing"])            # checked before any work
+            if spec["boundaries"] != "law" or spec["law"].get("select", "boundary") != "all":
+                raise InputError("packing", v["packing"], "a packing with boundaries=law and law select=all (the "
+                                 "profiled slab is a single crystal: no grain boundaries are built)")
         if v["t_end"] / v["snapshot_every"] > self.MAX_SNAPSHOTS:
             raise InputError("snapshot_every", f"{v['snapshot_every'] / units.us:g}us", f">= t_end / "
                              f"{self.MAX_SNAPSHOTS} = {v['t_end'] / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "

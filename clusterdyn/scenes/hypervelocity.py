@@ -164,37 +164,18 @@ def build_hypervelocity(v):
 
 def _polycrystal_bodies(v, r0, t, R, D, ax):
     """Plate and sphere as polycrystals of the packing ``v["packing"]`` (grain size, porosity and
-    boundaries; the scene's rc), quenched apart and at rest (:func:`clusterdyn.scenes.packing.prepare`),
-    then the sphere brought to ``START_GAP`` and set flying.  Returns ``(atoms, calc, term, notes)``."""
-    from .packing import prepare, resolve_packing
-    from .plate_impact import relax_sample
+    boundaries; the scene's rc), quenched apart and at rest, then the sphere brought to
+    ``START_GAP`` and set flying (:func:`clusterdyn.scenes.packing.quench_and_launch`).
+    Returns ``(atoms, calc, term, notes)``."""
+    from .packing import quench_and_launch, resolve_packing
     spec = resolve_packing(v["packing"])
     poly = {"grain_size": spec["grain_size"] * r0, "target_porosity": spec["porosity"]}
     pl = plate(v["plate_material"], r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), seed=v["seed"], **poly)
     sp = sphere(v["sphere_material"], r0, D, center=(0.0, 0.0, 0.0), axis=ax, seed=v["seed"] + 1, **poly)
     sp = place(sp, pl, axis=ax, gap=RELAX_GAP * r0, side=1, align=True)
     atoms = combine_bodies([pl, sp])
-    if spec["boundaries"] == "bonded":
-        calc, term = ClusterDynamics(rc=v["rc"]), None
-        atoms.calc = calc
-        report = relax_sample(atoms, cycles=RELAX_CYCLES, lateral=False)
-    else:
-        calc, term, report = prepare(atoms, spec, v["rc"],
-                                     lambda a, tm: relax_sample(a, cycles=RELAX_CYCLES, lateral=False, term=tm))
-    body = atoms.arrays["body"]
-    z, rad = atoms.positions[:, ax], atoms.arrays["radius"]
-    gap = float((z - rad)[body == 1].min() - (z + rad)[body == 0].max())
-    atoms.positions[body == 1, ax] -= gap - START_GAP * r0
-    vel = np.zeros((len(atoms), 3))
-    vel[body == 1, ax] = -v["V"]
-    atoms.set_velocities(vel)
-    notes = [f"packing {spec.get('name', v['packing'])}: grains of {spec['grain_size']:g} r0, porosity "
-             f"{spec['porosity']:g} (target), boundaries {spec['boundaries']}, rc {v['rc']:g} (the scene's); "
-             f"quenched {RELAX_CYCLES} x 100 steps apart, smallest pair {report['min_r_over_r0']:.3f} r0"]
-    if term is not None:
-        b = report["boundary"]
-        notes.append(f"boundary law: {b['bonds']} bonds, {report['boundary_at_release']['failed']} failed at "
-                     f"release, {b['failed']} failed after the second quench")
+    calc, term, notes = quench_and_launch(atoms, spec, v["rc"], 1, ax, START_GAP * r0, -v["V"] * np.eye(3)[ax],
+                                          cycles=RELAX_CYCLES)
     return atoms, calc, term, notes
 
 

@@ -82,3 +82,50 @@ def test_hypervelocity_takes_the_packing_and_lammps_refuses_the_law(tmp_path):
     argv = ["run", "hypervelocity", "--engine", "lammps", "--deck-only", "--set", "packing=6061-T6", "--out", str(out)]
     assert main(argv) == 2
     assert not out.exists() or not any(out.iterdir())
+
+
+def _select_all_file(tmp_path, porosity=0.14, grain_size=4):
+    f = tmp_path / "all.json"
+    f.write_text(json.dumps({"grain_size": grain_size, "porosity": porosity, "rc": 1.15, "boundaries": "law",
+                             "law": {"sigma_t": 2.0, "ductility": 8.0, "select": "all"}}))
+    return str(f)
+
+
+def test_multilayer_takes_the_packing(tmp_path):
+    """Every layer and the sphere polycrystals of the packing, the sphere launched along +axis after
+    the quench; LAMMPS refuses the law in one line."""
+    from clusterdyn import units
+    from clusterdyn.cli import main
+    from clusterdyn.scenes.multilayer import LAYERS, build_multilayer
+    scene = get_scene("multilayer")
+    v = scene.parse({"r0": "3mm", "radius": "14mm", "noise": "0",
+                     "packing": _select_all_file(tmp_path, porosity=0.2, grain_size=3.2)})
+    scene.check(v)
+    atoms, dyn, info = build_multilayer(v)
+    assert [q.name for q in dyn.pieces if q.adds_forces] == ["boundary"]
+    body = atoms.arrays["body"]
+    vz = atoms.get_velocities()[:, 2]
+    assert np.allclose(vz[body == len(LAYERS)], 6.5 * units.km_s) and np.all(vz[body < len(LAYERS)] == 0)
+    assert info["t_contact"] > 0 and any("boundary law" in n for n in info["packing_notes"])
+    out = tmp_path / "ml"
+    assert main(["run", "multilayer", "--engine", "lammps", "--deck-only", "--set", "packing=6061-T6",
+                 "--out", str(out)]) == 2
+
+
+def test_ejecta_takes_a_law_on_every_pair_and_refuses_grains(tmp_path):
+    """ejecta: the law on every pair of the single-crystal slab (select=all); a packing that needs
+    grains is refused in one line; the run's probe stresses carry the bonds' share."""
+    # the tiny slab of tests/scenes/test_ejecta.py
+    TINY = {"r0": "1um", "rz": "6um", "wavelength": "16um", "n_periods": 1, "depth": "30um", "t_end": "0.018us",
+            "frames": 6, "probes": 6, "snapshot_every": "0.009us", "spectrum_time": "0.018us", "h5md": False}
+    sc = get_scene("ejecta")
+    with pytest.raises(InputError, match="packing"):
+        sc.check(sc.parse({**TINY, "packing": "paper"}))
+    v = sc.parse({**TINY, "packing": _select_all_file(tmp_path)})
+    sc.check(v)
+    atoms, dyn, info = sc.setup(v, "main")
+    term = next(q for q in dyn.pieces if q.adds_forces)
+    assert term.name == "boundary" and term.bonds.shape[0] > 3 * len(atoms)
+    assert atoms.calc.parameters["attraction"] == "initial"
+    plain_atoms, plain_dyn, _ = sc.setup(sc.parse(TINY), "main")
+    assert not any(q.adds_forces for q in plain_dyn.pieces)
