@@ -47,6 +47,8 @@ def test_tiny_spall_with_a_weak_law_pulls_back_less(tmp_path):
     assert qp["pc_spall_strength_cb"].value > 1.0                     # GPa: the paper's packing holds tension
     assert qw["pc_spall_strength_cb"].value < 0.5 * qp["pc_spall_strength_cb"].value   # the law's weak bonds do not
     assert abs(qw["pc_ledger_residual"].value) < 0.05
+    # the stress map carries the law's pair stresses: the largest tension is the bonds' (0 without them)
+    assert 0.1 < qw["pc_max_tension"].value < 2.0
 
 
 def test_taylor_refuses_an_unknown_packing():
