@@ -168,6 +168,7 @@ def _polycrystal_bodies(v, r0, t, R, D, ax):
     ``START_GAP`` and set flying (:func:`clusterdyn.scenes.packing.quench_and_launch`).
     Returns ``(atoms, calc, term, notes)``."""
     from .packing import quench_and_launch, resolve_packing
+    from .plate_impact import relax_sample
     spec = resolve_packing(v["packing"])
     poly = {"grain_size": spec["grain_size"] * r0, "target_porosity": spec["porosity"]}
     pl = plate(v["plate_material"], r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), seed=v["seed"], **poly)
@@ -175,6 +176,7 @@ def _polycrystal_bodies(v, r0, t, R, D, ax):
     sp = place(sp, pl, axis=ax, gap=RELAX_GAP * r0, side=1, align=True)
     atoms = combine_bodies([pl, sp])
     calc, term, notes = quench_and_launch(atoms, spec, v["rc"], 1, ax, START_GAP * r0, -v["V"] * np.eye(3)[ax],
+                                          lambda a, tm: relax_sample(a, cycles=RELAX_CYCLES, lateral=False, term=tm),
                                           cycles=RELAX_CYCLES)
     return atoms, calc, term, notes
 

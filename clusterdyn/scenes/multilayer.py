@@ -159,6 +159,7 @@ def _polycrystal_stack(v, r0, ax, gaps):
     quenched at rest, then the sphere brought to ``START_GAP`` and set flying
     (:func:`clusterdyn.scenes.packing.quench_and_launch`).  Returns ``(atoms, calc, term, notes)``."""
     from .packing import quench_and_launch, resolve_packing
+    from .plate_impact import relax_sample
     spec = resolve_packing(v["packing"])
     poly = {"grain_size": spec["grain_size"] * r0, "target_porosity": spec["porosity"]}
     e = np.eye(3)[ax]
@@ -173,6 +174,7 @@ def _polycrystal_stack(v, r0, ax, gaps):
     sp = place(sp, stack, axis=ax, gap=RELAX_GAP * r0, side=-1, align=True)
     atoms = combine_bodies([stack, sp])
     calc, term, notes = quench_and_launch(atoms, spec, v["rc"], len(LAYERS), ax, START_GAP * r0, v["V"] * e,
+                                          lambda a, tm: relax_sample(a, cycles=RELAX_CYCLES, lateral=False, term=tm),
                                           cycles=RELAX_CYCLES)
     return atoms, calc, term, notes
 

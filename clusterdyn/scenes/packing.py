@@ -76,15 +76,16 @@ def prepare(atoms, spec, rc, relax=None):
     return calc, term, report
 
 
-def quench_and_launch(atoms, spec, rc, mover, axis, gap, velocity, cycles=12):
+def quench_and_launch(atoms, spec, rc, mover, axis, gap, velocity, relax, cycles=12):
     """Bodies built at rest and apart (``atoms.arrays['body']``) with packing ``spec``: quenched
-    (:func:`prepare`, ``cycles`` x 100 steps, the law's bonds held then released), then body
+    (:func:`prepare` with ``relax(atoms, term)``, the scene's quench of ``cycles`` x 100 steps
+    without lateral rescaling, e.g. :func:`clusterdyn.scenes.plate_impact.relax_sample`; the law's
+    bonds held then released), then body
     ``mover`` brought to clearance ``gap`` (between the clusters' spheres, as
     :func:`clusterdyn.build.bodies.place`) from the others along ``axis``, on the side it came
     from, and given ``velocity`` (3,); the others at rest.  Returns ``(calc, term, notes)``."""
     import numpy as np
-    from .plate_impact import relax_sample
-    calc, term, report = prepare(atoms, spec, rc, lambda a, t: relax_sample(a, cycles=cycles, lateral=False, term=t))
+    calc, term, report = prepare(atoms, spec, rc, relax)
     m = atoms.arrays["body"] == mover
     z, rad = atoms.positions[:, axis], atoms.arrays["radius"]
     if z[m].mean() > z[~m].mean():          # above the others: moved down
