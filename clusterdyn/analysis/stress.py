@@ -10,7 +10,9 @@ docs/theory.md 1.4: the virial of particle a (energy units, tension positive) is
 and the stress of a region is ``sum_a W^a / V_region`` with ``<v>`` the
 region's mean velocity.  The potential part is the calculator's ``virials``
 property (:class:`~clusterdyn.calculators.ClusterDynamics`; for another
-calculator, ``stresses`` times the cell volume, ASE's convention).  The
+calculator, ``stresses`` times the cell volume, ASE's convention), plus the
+share of forces a dynamics adds beside the calculator (the boundary pair law's
+bonds: :func:`add_piece_virials`).  The
 kinetic part and the volume belong to the region, so they are added here.
 
 Voigt order everywhere: xx, yy, zz, yz, xz, xy.  Stresses in eV/Angstrom^3
@@ -45,6 +47,24 @@ def particle_virials(atoms, calc=None):
     if atoms.cell.rank != 3:
         raise InputError("atoms.cell", atoms.cell, "a 3-D cell (per-atom stresses are per cell volume)")
     return np.asarray(calc.get_property("stresses", atoms)) * atoms.get_volume()
+
+
+def add_piece_virials(virials, dyn):
+    """The potential virials ``virials`` ((N, 6) eV) with the per-particle virials of the forces that
+    the dynamics ``dyn`` adds through its pieces (e.g. the boundary pair law's bonds,
+    :meth:`clusterdyn.md.boundary.BoundaryTerm.add_virials`: a piece with ``add_virials``).
+
+    Returns ``virials`` itself (no copy) when ``dyn`` has no such piece, else a new array (the
+    calculator's own result is not changed).  The pieces' virials are those of their last force
+    pass: call it after a step (or a force evaluation) at the current positions.
+    """
+    pieces = [q for q in getattr(dyn, "pieces", ()) if hasattr(q, "add_virials")]
+    if not pieces:
+        return virials
+    W = np.array(virials, dtype=float, copy=True)
+    for q in pieces:
+        q.add_virials(W)
+    return W
 
 
 def kinetic_virials(masses, velocities, mean_velocity):

@@ -168,9 +168,10 @@ def _row_map(ids, out):
 
 @njit(cache=True)
 def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, rest, kn, kt, ft, fs, mu, d0, df,
-                    ftab, tinv, kappa, lam, s, mode, dt, shear, fb, rb, vir):
+                    ftab, tinv, kappa, lam, s, mode, dt, shear, fb, rb, db, vir):
     """The force on particle i of every bond into ``fb`` ((M, 3); j gets minus it) and the bond's
-    rows into ``rb`` ((M, 2), -1 for a bond that lost a particle: :func:`scatter` adds them);
+    rows into ``rb`` ((M, 2), -1 for a bond that lost a particle: :func:`scatter` adds them),
+    its vector x_j - x_i (minimum image) into ``db`` ((M, 3): :func:`bond_virials`);
     returns (stored energy, energy dissipated by this pass (UPDATE: the stored energy that the
     damage growth and the slip remove at the current positions), failed bonds).
 
@@ -209,6 +210,9 @@ def boundary_kernel(x, p, invm, cell, icell, pbc, row, bi, bj, btype, r0, rest, 
             dx = f0 * cell[0, 0] + f1 * cell[1, 0] + f2 * cell[2, 0]
             dy = f0 * cell[0, 1] + f1 * cell[1, 1] + f2 * cell[2, 1]
             dz = f0 * cell[0, 2] + f1 * cell[1, 2] + f2 * cell[2, 2]
+        db[b, 0] = dx
+        db[b, 1] = dy
+        db[b, 2] = dz
         r = math.sqrt(dx * dx + dy * dy + dz * dz)
         nx = dx / r
         ny = dy / r
@@ -331,6 +335,29 @@ def scatter(fb, rb, f_out, p_kick, h):
                 p_kick[j, c] -= h * fb[b, c]
 
 
+@njit(cache=True)
+def bond_virials(fb, db, rb, out):
+    """``out`` ((N, 6) Voigt, eV, tension positive) += half of each bond's virial ``d (x) F`` on each
+    of its two particles (rows ``rb``): the bonds' share of the per-particle virial W^a of
+    docs/theory.md 1.4 (its sum over the particles is the term's ``virial``)."""
+    for b in range(fb.shape[0]):
+        i = rb[b, 0]
+        j = rb[b, 1]
+        if i < 0:
+            continue
+        dx, dy, dz = db[b, 0], db[b, 1], db[b, 2]
+        fx, fy, fz = fb[b, 0], fb[b, 1], fb[b, 2]
+        w0, w1, w2 = 0.5 * dx * fx, 0.5 * dy * fy, 0.5 * dz * fz
+        w3, w4, w5 = 0.5 * dy * fz, 0.5 * dx * fz, 0.5 * dx * fy
+        for a in (i, j):
+            out[a, 0] += w0
+            out[a, 1] += w1
+            out[a, 2] += w2
+            out[a, 3] += w3
+            out[a, 4] += w4
+            out[a, 5] += w5
+
+
 # --------------------------------------------------------------------------- bonds and the term
 def set_up_pairs(atoms, calc):
     """(i, j, r) of the pairs within the calculator's cutoff ``rc r0_ab`` now (i < j)."""
@@ -433,6 +460,7 @@ class BoundaryTerm(Piece):
         self._rowbuf = np.zeros(0, np.int64)
         self._fb = np.zeros((0, 3))
         self._rb = np.zeros((0, 2), np.int64)
+        self._db = np.zeros((0, 3))
         self.nfailed = 0
         #: True: the bonds are elastic springs (no damage, no slip, no history advanced): a
         #: quench of the packing with its bonds intact (set back to False before the run)
@@ -501,12 +529,13 @@ class BoundaryTerm(Piece):
         if self._fb.shape[0] != m:
             self._fb = np.zeros((m, 3))
             self._rb = np.full((m, 2), -1, np.int64)
+            self._db = np.zeros((m, 3))
         if self.hold:
             mode = FROZEN
         e, slip, nfail = boundary_kernel(x, p, invm, cell, icell, pbc, self._rows(atoms), self.bonds[:, 0],
                                          self.bonds[:, 1], self.btype, self.r0, self.rest, self.kn, self.kt, self.ft, self.fs,
                                          self.law.mu, self.d0, self.df, self.ftab, self.tinv, self.kappa, self.lam,
-                                         self.s, mode, float(dt), self.law.shear, self._fb, self._rb, vir)
+                                         self.s, mode, float(dt), self.law.shear, self._fb, self._rb, self._db, vir)
         self.slip_dissipated += slip
         self.stored_energy = e
         self.virial = vir
@@ -517,6 +546,15 @@ class BoundaryTerm(Piece):
         """Add the forces of the last :meth:`evaluate` to ``forces`` (in place); with ``momenta``
         also ``momenta += h`` times them (the dynamics' second half kick)."""
         scatter(self._fb, self._rb, forces, momenta if momenta is not None else np.zeros((0, 3)), float(h))
+
+    def add_virials(self, virials):
+        """Add the bonds' per-particle virials of the last pass ((N, 6) Voigt, eV, tension positive;
+        rows of the Atoms of that pass) to ``virials`` in place, and return it.  The dynamics
+        evaluates the bonds at every step's positions, so after a step this is the bonds' share
+        of the stress at the current positions (:func:`clusterdyn.analysis.stress.add_piece_virials`)."""
+        if self._fb.shape[0]:
+            bond_virials(self._fb, self._db, self._rb, virials)
+        return virials
 
     def accumulate(self, atoms, forces, mode=TRIAL):
         """:meth:`evaluate` then :meth:`scatter` into ``forces``; returns the stored energy."""

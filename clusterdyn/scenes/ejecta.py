@@ -78,6 +78,7 @@ from ..analysis.ejecta import (BREAKOUT_FRACTION, FS_LAYER, G_TIP, MARGIN, Eject
                                spectrum_table)
 from ..analysis.fragment_spectra import G_MAX
 from ..analysis.shock import hugoniot_interpolant
+from ..analysis.stress import add_piece_virials
 from ..build import fcc_packing, along_axis, parse_axis, repeat_lengths
 from ..build.bodies import crystal_rotation, plane_spacing
 from ..build.lattice import ORIENTATIONS, lattice_sound_speed, parse_direction
@@ -304,9 +305,15 @@ class ProfiledShockScene(SceneDef):
                                 slab_cells=v.slab_cells)
         else:
             atoms = profiled_sample(mat, r0, prof, depth=depth, width=width, axis=ax, direction=_dir_key(v), dims=2,
-                                    slab_cells=v.slab_cells)
-        calc = ClusterDynamics(rc=v.rc)
-        atoms.calc = calc
+                                    slab_cells=v["slab_cells"])
+        term = None
+        if v.get("packing") is None:
+            calc = ClusterDynamics(rc=v["rc"])
+            atoms.calc = calc
+        else:                   # the law on every set-up pair of the lattice (at rest: no quench)
+            from ..md.boundary import apply_boundary_law
+            from .packing import law_of, resolve_packing
+            calc, term = apply_boundary_law(atoms, law_of(resolve_packing(v["packing"])), rc=v["rc"])
         calc.setup(atoms)
         mask = piston_layer(atoms, piston_thickness(r0), ax)
         e = np.zeros(3)
@@ -318,8 +325,10 @@ class ProfiledShockScene(SceneDef):
         thermal_noise(atoms, v.noise, v.seed, exclude=mask)
         atoms.set_constraint(piston)
         atoms.set_momenta(atoms.get_momenta())
-        dt = shock_timestep(calc, u, v.dt_factor)
-        dyn = DampedVerlet(atoms, timestep=dt, J=v.J)
+        dt = shock_timestep(calc, u, v["dt_factor"])
+        dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+        if term is not None:
+            dyn.attach_piece(term)
         x = atoms.positions[:, ax]
         p = atoms.info["profile"]
         iu = (ax + 1) % 3
@@ -365,7 +374,8 @@ class ProfiledShockScene(SceneDef):
 
         def probe_obs():
             if not probe.done:
-                probe.sample(dyn.get_time(), atoms, calc.compute(atoms, per_particle=True, forces=False)["virials"])
+                probe.sample(dyn.get_time(), atoms,
+                             add_piece_virials(calc.compute(atoms, per_particle=True, forces=False)["virials"], dyn))
 
         def frame(d):
             rec.add(d.get_time(), atoms)
@@ -579,6 +589,9 @@ EJECTA_PARAMS = [
           optional=True),
     Param("corrections", False, "apply the paper's two spectrum corrections (no particles under 10 um, then "
           "every size +5 um) to the reported size distribution", kind="bool"),
+    Param("packing", None, "the boundary pair law on every pair of the slab: a packing preset or JSON file "
+          "(clusterdyn.scenes.packing) with boundaries=law and select=all (the slab stays a single crystal: the "
+          "packing's grain size and porosity are not built); none = the paper's model", kind="str", optional=True),
 ]
 
 
@@ -613,13 +626,19 @@ class EjectaScene(ProfiledShockScene):
 
     def check(self, v):
         super().check(v)
-        if v.t_end / v.snapshot_every > self.MAX_SNAPSHOTS:
-            raise InputError("snapshot_every", f"{v.snapshot_every / units.us:g}us", f">= t_end / "
-                             f"{self.MAX_SNAPSHOTS} = {v.t_end / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
-                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v.t_end / units.us:g} us)")
-        if v.profile == "random":
-            lam = v.wavelength if v.wavelength is not None else CASES[v.case][1]
-            r0 = v.r0 if v.r0 is not None else CASES[v.case][3]
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            spec = resolve_packing(v["packing"])            # checked before any work
+            if spec["boundaries"] != "law" or spec["law"].get("select", "boundary") != "all":
+                raise InputError("packing", v["packing"], "a packing with boundaries=law and law select=all (the "
+                                 "profiled slab is a single crystal: no grain boundaries are built)")
+        if v["t_end"] / v["snapshot_every"] > self.MAX_SNAPSHOTS:
+            raise InputError("snapshot_every", f"{v['snapshot_every'] / units.us:g}us", f">= t_end / "
+                             f"{self.MAX_SNAPSHOTS} = {v['t_end'] / self.MAX_SNAPSHOTS / units.us:.4g} us (at most "
+                             f"{self.MAX_SNAPSHOTS} velocity snapshots; t_end = {v['t_end'] / units.us:g} us)")
+        if v["profile"] == "random":
+            lam = v["wavelength"] if v["wavelength"] is not None else CASES[v["case"]][1]
+            r0 = v["r0"] if v["r0"] is not None else CASES[v["case"]][3]
             if 0.25 * lam < r0:
                 raise InputError("wavelength", lam / units.um, f">= 4 r0 = {4 * r0 / units.um:g} um (random: the "
                                  "correlation length wavelength/4 must be >= r0)")

@@ -104,7 +104,15 @@ PARAMS = [
           "t_end)", kind="str"),
 ] + projectile_params(TIMESTEP_FACTOR, "time step as a fraction of r0/(c0 + V)") + [
     Param("axis", "z", "plate normal; the sphere flies along -axis", kind="choice", choices=("x", "y", "z")),
+    Param("packing", None, "plate and sphere as polycrystals: a packing preset or JSON file (clusterdyn.scenes.packing; "
+          "sets grain size, porosity and boundaries, e.g. the boundary law; rc stays the scene's); none = single "
+          "crystals", kind="str", optional=True),
 ]
+
+#: quench cycles of 100 steps of a polycrystal set-up (``packing``), bodies apart and at rest
+RELAX_CYCLES = 12
+#: clearance between the bodies during that quench, in r0
+RELAX_GAP = 3.0
 
 
 def build_hypervelocity(v):
@@ -112,14 +120,18 @@ def build_hypervelocity(v):
     r0, V, ax = v.r0, v.V, parse_axis(v.axis)
     t, R, D = v.thickness, v.radius, v.diameter
     e = np.eye(3)[ax]
-    pl = plate(v.plate_material, r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), orientation="100")
-    rot = Rotation.random(random_state=v.seed).as_matrix()
-    sp = sphere(v.sphere_material, r0, D, center=(0.0, 0.0, 0.0), velocity=-V * e, axis=ax, orientation=rot)
-    sp = place(sp, pl, axis=ax, gap=START_GAP * r0, side=1, align=True)
-    atoms = combine_bodies([pl, sp])
-    calc = ClusterDynamics(rc=v.rc)
-    atoms.calc = calc
-    thermal_noise(atoms, v.noise, v.seed)
+    rot = Rotation.random(random_state=v["seed"]).as_matrix()
+    term, notes = None, []
+    if v.get("packing") is None:
+        pl = plate(v["plate_material"], r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), orientation="100")
+        sp = sphere(v["sphere_material"], r0, D, center=(0.0, 0.0, 0.0), velocity=-V * e, axis=ax, orientation=rot)
+        sp = place(sp, pl, axis=ax, gap=START_GAP * r0, side=1, align=True)
+        atoms = combine_bodies([pl, sp])
+        calc = ClusterDynamics(rc=v["rc"])
+        atoms.calc = calc
+    else:
+        atoms, calc, term, notes = _polycrystal_bodies(v, r0, t, R, D, ax)
+    thermal_noise(atoms, v["noise"], v["seed"])
     calc.setup(atoms)
     c0 = max(p.c0 for p in calc.potentials)
     dt = v.dt_factor * r0 / (c0 + V)
@@ -127,7 +139,9 @@ def build_hypervelocity(v):
     if v.get("keep_within") is not None:
         half = float(v.keep_within)
         region = RegionOfInterest(lo=[-half] * 3, hi=[half] * 3)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v.J, region=region)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"], region=region)
+    if term is not None:
+        dyn.attach_piece(term)
     dyn.start_ledger()
     body = atoms.arrays["body"]
     z = atoms.positions[:, ax]
@@ -143,7 +157,28 @@ def build_hypervelocity(v):
             "m_sphere_g": float(atoms.get_masses()[body == 1].sum() / units.g),
             "rotation": rot.tolist(), "bodies": [{k: b[k] for k in ("kind", "material", "n_clusters", "porosity")}
                                                  for b in atoms.info["bodies"]]}
+    if v.get("packing") is not None:
+        info.update({"packing": str(v["packing"]), "packing_notes": notes})
     return atoms, dyn, info
+
+
+def _polycrystal_bodies(v, r0, t, R, D, ax):
+    """Plate and sphere as polycrystals of the packing ``v["packing"]`` (grain size, porosity and
+    boundaries; the scene's rc), quenched apart and at rest, then the sphere brought to
+    ``START_GAP`` and set flying (:func:`clusterdyn.scenes.packing.quench_and_launch`).
+    Returns ``(atoms, calc, term, notes)``."""
+    from .packing import quench_and_launch, resolve_packing
+    from .plate_impact import relax_sample
+    spec = resolve_packing(v["packing"])
+    poly = {"grain_size": spec["grain_size"] * r0, "target_porosity": spec["porosity"]}
+    pl = plate(v["plate_material"], r0, t, radius=R, axis=ax, center=(0.0, 0.0, 0.0), seed=v["seed"], **poly)
+    sp = sphere(v["sphere_material"], r0, D, center=(0.0, 0.0, 0.0), axis=ax, seed=v["seed"] + 1, **poly)
+    sp = place(sp, pl, axis=ax, gap=RELAX_GAP * r0, side=1, align=True)
+    atoms = combine_bodies([pl, sp])
+    calc, term, notes = quench_and_launch(atoms, spec, v["rc"], 1, ax, START_GAP * r0, -v["V"] * np.eye(3)[ax],
+                                          lambda a, tm: relax_sample(a, cycles=RELAX_CYCLES, lateral=False, term=tm),
+                                          cycles=RELAX_CYCLES)
+    return atoms, calc, term, notes
 
 
 class HyperRecord:
@@ -258,7 +293,10 @@ class HypervelocityScene(SceneDef):
                 raise InputError("keep_within", f"{v.keep_within / units.mm:g}mm", f"at least "
                                  f"{need / units.mm:g} mm (the plate radius or the sphere's start, plus 2 r0: "
                                  "the region must hold the set-up)")
-        late = [t for t in parse_times(v.image_times, "image_times", []) if t > v.t_end * (1 + 1e-9)]
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            resolve_packing(v["packing"])            # checked before any work
+        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
         if late:
             raise InputError("image_times", v.image_times, f"auto or times within the run, 0-"
                              f"{v.t_end / units.us:g} us (t_end)")
@@ -350,6 +388,7 @@ class HypervelocityScene(SceneDef):
         notes.append("Table 2 (d mm, theta deg): experiment 17.3 / 20.67, the paper's SPH 18.0 / 27.08, its CD "
                      "17 / 39; plate thickness 1.6 mm inferred from the hole-size law")
         notes.append(lnote)
+        notes += info.get("packing_notes", [])
         for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         extra = {"history": {k: [r[k] for r in rows] for k in rows[0]}, "ledger_J": sm["ledger"],

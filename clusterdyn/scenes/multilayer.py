@@ -48,7 +48,7 @@ from ..analysis.fragment_spectra import largest_piece
 from ..analysis.fragments import fragments
 from ..analysis.impact import plate_hole
 from ..build import parse_axis
-from ..build.bodies import combine_bodies, place, plate_stack, sphere
+from ..build.bodies import combine_bodies, place, plate, plate_stack, sphere
 from ..calculators import ClusterDynamics
 from ..errors import InputError
 from ..materials import cd_material_names
@@ -98,7 +98,15 @@ PARAMS = [
 ] + projectile_params(DT_FACTOR, "time step as a fraction of the smallest r0/(c0 + V) (default twice the "
                       "project's 0.03, module docstring)") + [
     Param("axis", "z", "the stack's axis; the sphere flies along +axis", kind="choice", choices=("x", "y", "z")),
+    Param("packing", None, "every layer and the sphere as polycrystals: a packing preset or JSON file "
+          "(clusterdyn.scenes.packing; grain size, porosity and boundaries, the same for every material; rc stays "
+          "the scene's); none = single crystals", kind="str", optional=True),
 ]
+
+#: quench cycles of 100 steps of a polycrystal set-up (``packing``), bodies at rest
+RELAX_CYCLES = 12
+#: clearance between the sphere and the stack during that quench, in r0
+RELAX_GAP = 3.0
 
 
 def build_multilayer(v):
@@ -106,17 +114,23 @@ def build_multilayer(v):
     r0, V, ax = v.r0, v.V, parse_axis(v.axis)
     e = np.eye(3)[ax]
     gaps = [CONTACT_GAP * r0 if g is None else g for g in GAPS]
-    stack = plate_stack(LAYERS, r0, v.radius, gaps=gaps, axis=ax, origin=(0.0, 0.0, 0.0), orientation="100")
-    rot = Rotation.random(random_state=v.seed).as_matrix()
-    sp = sphere(v.sphere_material, r0, v.diameter, velocity=V * e, axis=ax, orientation=rot)
-    sp = place(sp, stack, axis=ax, gap=START_GAP * r0, side=-1, align=True)
-    atoms = combine_bodies([stack, sp])
-    calc = ClusterDynamics(rc=v.rc)
-    atoms.calc = calc
-    thermal_noise(atoms, v.noise, v.seed)
+    rot = Rotation.random(random_state=v["seed"]).as_matrix()
+    term, notes = None, []
+    if v.get("packing") is None:
+        stack = plate_stack(LAYERS, r0, v["radius"], gaps=gaps, axis=ax, origin=(0.0, 0.0, 0.0), orientation="100")
+        sp = sphere(v["sphere_material"], r0, v["diameter"], velocity=V * e, axis=ax, orientation=rot)
+        sp = place(sp, stack, axis=ax, gap=START_GAP * r0, side=-1, align=True)
+        atoms = combine_bodies([stack, sp])
+        calc = ClusterDynamics(rc=v["rc"])
+        atoms.calc = calc
+    else:
+        atoms, calc, term, notes = _polycrystal_stack(v, r0, ax, gaps)
+    thermal_noise(atoms, v["noise"], v["seed"])
     calc.setup(atoms)
-    dt = v.dt_factor * min(p.r0 / (p.c0 + V) for p in calc.potentials)
-    dyn = DampedVerlet(atoms, timestep=dt, J=v.J)
+    dt = v["dt_factor"] * min(p.r0 / (p.c0 + V) for p in calc.potentials)
+    dyn = DampedVerlet(atoms, timestep=dt, J=v["J"])
+    if term is not None:
+        dyn.attach_piece(term)
     dyn.start_ledger()
     body = atoms.arrays["body"]
     z = atoms.positions[:, ax]
@@ -134,7 +148,35 @@ def build_multilayer(v):
     info = {"r0": r0, "V": V, "axis": ax, "dt": dt, "nsteps": nsteps, "t_contact": t_contact, "layers": layers,
             "radius": v.radius, "n_sphere": int((body == nl).sum()), "sphere_body": nl,
             "m_sphere_g": float(m[body == nl].sum() / units.g), "rotation": rot.tolist()}
+    if v.get("packing") is not None:
+        info.update({"packing": str(v["packing"]), "packing_notes": notes})
     return atoms, dyn, info
+
+
+def _polycrystal_stack(v, r0, ax, gaps):
+    """Every layer and the sphere as polycrystals of the packing ``v["packing"]`` (grain size, porosity
+    and boundaries, the same for every material; the scene's rc; layer k seeded ``seed + k``),
+    quenched at rest, then the sphere brought to ``START_GAP`` and set flying
+    (:func:`clusterdyn.scenes.packing.quench_and_launch`).  Returns ``(atoms, calc, term, notes)``."""
+    from .packing import quench_and_launch, resolve_packing
+    from .plate_impact import relax_sample
+    spec = resolve_packing(v["packing"])
+    poly = {"grain_size": spec["grain_size"] * r0, "target_porosity": spec["porosity"]}
+    e = np.eye(3)[ax]
+    plates = []
+    for k, (mat, t) in enumerate(LAYERS):
+        p = plate(mat, r0, t, radius=v["radius"], axis=ax, center=0.5 * t * e, seed=v["seed"] + k, **poly)
+        if k:
+            p = place(p, plates[-1], axis=ax, gap=float(gaps[k - 1]), side=1, align=True)
+        plates.append(p)
+    stack = combine_bodies(plates)
+    sp = sphere(v["sphere_material"], r0, v["diameter"], axis=ax, seed=v["seed"] + len(LAYERS), **poly)
+    sp = place(sp, stack, axis=ax, gap=RELAX_GAP * r0, side=-1, align=True)
+    atoms = combine_bodies([stack, sp])
+    calc, term, notes = quench_and_launch(atoms, spec, v["rc"], len(LAYERS), ax, START_GAP * r0, v["V"] * e,
+                                          lambda a, tm: relax_sample(a, cycles=RELAX_CYCLES, lateral=False, term=tm),
+                                          cycles=RELAX_CYCLES)
+    return atoms, calc, term, notes
 
 
 class StackRecord:
@@ -197,14 +239,17 @@ class MultilayerScene(SceneDef):
 
     def check(self, v):
         thin = min(t for _, t in LAYERS)
-        if v.r0 > thin:
-            raise InputError("r0", f"{v.r0 / units.mm:g}mm", f"at most the thinnest layer {thin / units.mm:g} mm")
-        if v.radius < v.diameter:
-            raise InputError("radius", f"{v.radius / units.mm:g}mm", "at least the sphere diameter")
-        if v.diameter < 4 * v.r0:
-            raise InputError("r0", f"{v.r0 / units.mm:g}mm", f"at most a quarter of the sphere diameter, "
-                             f"{v.diameter / 4 / units.mm:g} mm (a sphere of a few clusters across)")
-        late = [t for t in parse_times(v.image_times, "image_times", []) if t > v.t_end * (1 + 1e-9)]
+        if v["r0"] > thin:
+            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most the thinnest layer {thin / units.mm:g} mm")
+        if v["radius"] < v["diameter"]:
+            raise InputError("radius", f"{v['radius'] / units.mm:g}mm", "at least the sphere diameter")
+        if v["diameter"] < 4 * v["r0"]:
+            raise InputError("r0", f"{v['r0'] / units.mm:g}mm", f"at most a quarter of the sphere diameter, "
+                             f"{v['diameter'] / 4 / units.mm:g} mm (a sphere of a few clusters across)")
+        if v["packing"] is not None:
+            from .packing import resolve_packing
+            resolve_packing(v["packing"])            # checked before any work
+        late = [t for t in parse_times(v["image_times"], "image_times", []) if t > v["t_end"] * (1 + 1e-9)]
         if late:
             raise InputError("image_times", v.image_times, f"auto or times within the run, 0-"
                              f"{v.t_end / units.us:g} us (t_end)")
@@ -288,6 +333,7 @@ class MultilayerScene(SceneDef):
                      f"{sm['t_run']:.1f} s stepping, {sm['n'] * sm['steps'] / max(sm['t_run'], 1e-9):.3g} "
                      f"particle-steps/s, {sm['nbuilds']} neighbour-list builds; {sm['n_fragments']} fragments")
         notes.append(lnote)
+        notes += info.get("packing_notes", [])
         for r in v.retried:
             notes.append(f"time step halved after a stop: {r}")
         extra = {"holes_mm": [[r["t"] / units.us] + [d / units.mm for d in r["holes"]] for r in sm["rows"]],

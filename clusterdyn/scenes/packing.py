@@ -19,7 +19,7 @@ from ..errors import InputError
 from ..md.boundary import BoundaryLaw, apply_boundary_law
 from .base import Param
 
-__all__ = ["packing_param", "resolve_packing", "prepare", "PACKINGS"]
+__all__ = ["packing_param", "resolve_packing", "prepare", "quench_and_launch", "PACKINGS"]
 
 
 def packing_param(default="paper", doc=None):
@@ -74,6 +74,35 @@ def prepare(atoms, spec, rc, relax=None):
             report["released"] = relax(atoms, term)
         report["boundary"] = term.summary()
     return calc, term, report
+
+
+def quench_and_launch(atoms, spec, rc, mover, axis, gap, velocity, relax, cycles=12):
+    """Bodies built at rest and apart (``atoms.arrays['body']``) with packing ``spec``: quenched
+    (:func:`prepare` with ``relax(atoms, term)``, the scene's quench of ``cycles`` x 100 steps
+    without lateral rescaling, e.g. :func:`clusterdyn.scenes.plate_impact.relax_sample`; the law's
+    bonds held then released), then body
+    ``mover`` brought to clearance ``gap`` (between the clusters' spheres, as
+    :func:`clusterdyn.build.bodies.place`) from the others along ``axis``, on the side it came
+    from, and given ``velocity`` (3,); the others at rest.  Returns ``(calc, term, notes)``."""
+    import numpy as np
+    calc, term, report = prepare(atoms, spec, rc, relax)
+    m = atoms.arrays["body"] == mover
+    z, rad = atoms.positions[:, axis], atoms.arrays["radius"]
+    if z[m].mean() > z[~m].mean():          # above the others: moved down
+        atoms.positions[m, axis] -= float((z - rad)[m].min() - (z + rad)[~m].max()) - gap
+    else:
+        atoms.positions[m, axis] += float((z - rad)[~m].min() - (z + rad)[m].max()) - gap
+    vel = np.zeros((len(atoms), 3))
+    vel[m] = np.asarray(velocity, float)
+    atoms.set_velocities(vel)
+    notes = [f"packing {spec.get('name', '')}: grains of {spec['grain_size']:g} r0, porosity {spec['porosity']:g} "
+             f"(target), boundaries {spec['boundaries']}, rc {rc:g} (the scene's); quenched {cycles} x 100 steps "
+             f"apart, smallest pair {report['min_r_over_r0']:.3f} r0"]
+    if term is not None:
+        b = report["boundary"]
+        notes.append(f"boundary law: {b['bonds']} bonds, {report['boundary_at_release']['failed']} failed at "
+                     f"release, {b['failed']} failed after the second quench")
+    return calc, term, notes
 
 
 def refuse_law_on_lammps(v):

@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import units
 from ..analysis.profiles import ProfileRecorder, write_profiles_csv
-from ..analysis.stress import particle_virials
+from ..analysis.stress import add_piece_virials, particle_virials
 from ..build import Plate, fcc_packing, polycrystal
 from ..build.lattice import SQRT2, lattice_sound_speed
 from ..calculators import ClusterDynamics, mark_initial_bonds
@@ -226,9 +226,9 @@ class ImpactRecord:
 
     def frame(self, d):
         """Profile the current frame; returns the particles' potential virials (N, 6), eV."""
-        out = self.atoms.calc.compute(self.atoms, per_particle=True, forces=False)
-        self.rec.add(self.atoms, out["virials"], d.get_time())
-        return out["virials"]
+        W = add_piece_virials(self.atoms.calc.compute(self.atoms, per_particle=True, forces=False)["virials"], self.dyn)
+        self.rec.add(self.atoms, W, d.get_time())
+        return W
 
     def get_state(self):
         return {"profiles": self.rec.get_state(), "fsv_t": list(self.fsv_t), "fsv_v": list(self.fsv_v)}

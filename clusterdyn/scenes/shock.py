@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import units
 from ..analysis.shock import ShockTracker
+from ..analysis.stress import add_piece_virials
 from ..build import along_axis, fcc_packing, parse_axis, repeat_lengths
 from ..build.lattice import lattice_sound_speed
 from ..build.two_phase import rest_volumes, two_phase
@@ -434,8 +435,8 @@ def shock_frame(setup, tracker, on_frame=None):
     atoms, calc, mask, ax = setup.atoms, setup.calc, setup.piston_mask, setup.axis
 
     def frame(dyn):
-        out = calc.compute(atoms, per_particle=True, forces=False)
-        tracker.add(dyn.get_time(), atoms, out["virials"], atoms.positions[mask, ax].max(), exclude=mask)
+        W = add_piece_virials(calc.compute(atoms, per_particle=True, forces=False)["virials"], dyn)
+        tracker.add(dyn.get_time(), atoms, W, atoms.positions[mask, ax].max(), exclude=mask)
         if on_frame is not None:
             on_frame(dyn)
     return frame

@@ -13,7 +13,7 @@ from ase.md.verlet import VelocityVerlet
 from clusterdyn.build.mca import mca_packing
 from clusterdyn.mca.calculator import MCA
 from clusterdyn.mca.dynamics import MCADynamics, wave_speeds
-from clusterdyn.studies.mca import elastic_material
+from clusterdyn.analysis.mca_elastic import elastic_material
 
 
 def _body(seed=1, cell=True):

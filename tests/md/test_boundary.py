@@ -181,3 +181,39 @@ def test_bad_input_is_refused():
         BoundaryLaw(sigma_t=1, G_c=1, select="grain")
     with pytest.raises(InputError, match="G_c"):
         _pair(1.0, BoundaryLaw(sigma_t=5 * units.GPa, G_c=1e-3 * J_M2))
+
+
+def test_stress_map_with_the_law_matches_the_global_virial():
+    """The law's pair stresses are in the stress maps: the per-particle virials with the bonds' share
+    (analysis.stress.add_piece_virials) sum to the calculator's virial plus the term's, and a slab
+    map over the whole cell integrates to the cell stress from the global virial.  The bonds carry
+    a large share of the stress here, so a map without them would miss it."""
+    from clusterdyn.analysis.slabs import stress_profile
+    from clusterdyn.analysis.stress import add_piece_virials, cell_stress, particle_virials
+    atoms, calc, term = _cube(BoundaryLaw(sigma_t=5.0 * units.GPa, G_c=2000 * J_M2), seed=2)
+    atoms.set_cell(atoms.cell.array * 1.01, scale_atoms=True)
+    dyn = DampedVerlet(atoms, J=50)
+    dyn.attach_piece(term)
+    dyn.run(5)
+    W0 = calc.compute(atoms, per_particle=True, forces=False)["virials"]
+    W = add_piece_virials(W0, dyn)
+    assert W is not W0 and np.array_equal(W0, particle_virials(atoms))     # the calculator's result untouched
+    total = particle_virials(atoms).sum(axis=0) + term.virial
+    assert np.allclose(W.sum(axis=0), total, rtol=1e-12, atol=1e-12 * np.abs(total).max())
+    assert abs(term.virial[0]) > 0.2 * abs(total[0])                      # the bonds' share matters
+    s_global = cell_stress(atoms, np.vstack([particle_virials(atoms), term.virial[None, :]]))
+    L = atoms.cell[0, 0]
+    prof = stress_profile(atoms, L / 4, virials=W, axis=0, lo=0.0, hi=L)
+    vol = atoms.get_volume() / 4
+    s_map = (prof["stress"] * vol).sum(axis=0) / atoms.get_volume()
+    kin_free = cell_stress(atoms, W)
+    assert np.allclose(kin_free, s_global, rtol=1e-12, atol=1e-15)
+    # the map's slabs carry the kinetic part about their own mean velocity: equal to the cell's to
+    # the velocity noise (5 steps from rest), far below the bonds' share
+    assert np.allclose(s_map, s_global, rtol=1e-3, atol=1e-3 * np.abs(s_global).max())
+    plain = stress_profile(atoms, L / 4, virials=W0, axis=0, lo=0.0, hi=L)
+    assert not np.allclose((plain["stress"] * vol).sum(axis=0) / atoms.get_volume(), s_global, rtol=0.1)
+    # no piece: the same array back (the default scenes keep their bits)
+    a2 = atoms.copy()
+    a2.calc = ClusterDynamics()
+    assert add_piece_virials(W0, DampedVerlet(a2, J=50)) is W0
