@@ -355,6 +355,22 @@ class TaylorRecord:
                              else self.atoms.get_kinetic_energy()))
         self.contact.append(bool(z.min() - self.wall_z < self.reach))
 
+    def expected_steps(self, d):
+        """The step the run is expected to stop at, for the progress bar's time left (None until the
+        rod decelerates): the centre of mass brought to rest at its present deceleration, plus the stop
+        window.  Only an estimate for the bar: the stop itself is :meth:`stop`'s."""
+        t, v = self.t, self.vz
+        if len(t) < 3:
+            return None
+        if v[-1] >= 0:
+            want = t[-1] + STOP_WINDOW
+        else:
+            a = (v[-1] - v[-3]) / (t[-1] - t[-3])
+            if a <= 0:
+                return None
+            want = t[-1] - v[-1] / a + STOP_WINDOW
+        return int(want / d.dt)
+
     def stop(self, d):
         t = np.asarray(self.t)
         if len(t) < 2 or t[-1] < STOP_WINDOW:

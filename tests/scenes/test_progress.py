@@ -74,3 +74,19 @@ def test_time_left_counts_to_the_expected_stop(capsys):
     assert any(re.search(r"\| *[1-9]\d*/300 ", s) for s in lines), lines[-3:]
     late = [s for s in lines if re.search(r"\| *[1-9]\d\d+/", s)]   # from the first frame on
     assert late and not any("/10000 " in s for s in late), late
+
+
+def test_taylor_expects_its_stop_from_the_rods_deceleration():
+    """The Taylor rod's bar counts to the step the centre of mass comes to rest (plus the stop window),
+    not to t_max."""
+    from types import SimpleNamespace
+    from clusterdyn import units
+    from clusterdyn.scenes.taylor import STOP_WINDOW, TaylorRecord
+    rec = TaylorRecord.__new__(TaylorRecord)
+    dt = 1e-3 * units.us
+    rec.t = [0.0, 1.0 * units.us, 2.0 * units.us]
+    rec.vz = [-300.0 * units.m_s, -200.0 * units.m_s, -100.0 * units.m_s]     # at rest at 3 us
+    want = rec.expected_steps(SimpleNamespace(dt=dt))
+    assert abs(want - (3.0 * units.us + STOP_WINDOW) / dt) <= 1
+    rec.vz = [-300.0 * units.m_s, -300.0 * units.m_s, -300.0 * units.m_s]     # not decelerating: no estimate
+    assert rec.expected_steps(SimpleNamespace(dt=dt)) is None
