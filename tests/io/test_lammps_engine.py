@@ -23,12 +23,16 @@ def result(folder):
     return json.loads((folder / "result.json").read_text())
 
 
-def test_shock_both_engines_agree(tmp_path):
+def test_shock_both_engines_agree(tmp_path, capsys):
     """D, u, P of the shock on LAMMPS equal clusterdyn's far within the front fit's spread (the runs differ by
     the table interpolation and round-off only); the report has the same files, H5MD written from the dumps."""
     a, b = tmp_path / "numba", tmp_path / "lammps"
     assert main(["run", "shock", *SHOCK, "--out", str(a), "--quiet"]) == 0
-    assert main(["run", "shock", *SHOCK, "--out", str(b), "--quiet", "--engine", "lammps"]) == 0
+    capsys.readouterr()
+    assert main(["run", "shock", *SHOCK, "--out", str(b), "--json", "--engine", "lammps"]) == 0
+    got = capsys.readouterr()
+    assert json.loads(got.out)["scene"] == "shock"              # stdout: the JSON only
+    assert "LAMMPS on 1 rank(s): " in got.err and " steps in " in got.err      # progress on stderr
     ra, rb = result(a), result(b)
     for q in ("D", "u", "P", "rho"):
         va, vb = ra[q]["value"], rb[q]["value"]
@@ -100,6 +104,21 @@ def test_engine_options_checked(tmp_path, capsys):
     assert main(["run", "shock", "--engine", "lammps", "--set", "checkpoint_every=5", "--out",
                  str(tmp_path / "c")]) == EXIT_INPUT
     assert "checkpoint_every" in capsys.readouterr().err
+
+
+def test_no_mpirun_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """--ranks 2 where there is no mpirun: one line naming --ranks and the missing mpirun, exit 2, nothing
+    written; --deck-only still writes the decks (a cluster's own mpirun runs them)."""
+    import clusterdyn.io.lammps.run as run_module
+    monkeypatch.setattr(run_module, "mpirun_path", lambda: None)
+    out = tmp_path / "x"
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--ranks", "2", "--out", str(out)]) == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--ranks" in err and "no mpirun" in err, err
+    assert not out.exists()
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--ranks", "2", "--deck-only", "--out", str(out),
+                 "--quiet"]) == 0
+    assert (out / "in.cd").is_file() and not (out / "log.lammps").exists()
 
 
 def test_taylor_wall_ledger(tmp_path):
