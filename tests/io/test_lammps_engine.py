@@ -104,6 +104,12 @@ def test_engine_options_checked(tmp_path, capsys):
     assert main(["run", "shock", "--engine", "lammps", "--set", "checkpoint_every=5", "--out",
                  str(tmp_path / "c")]) == EXIT_INPUT
     assert "checkpoint_every" in capsys.readouterr().err
+    out = tmp_path / "d"                  # max_wall against the LAMMPS run's own estimate, before any file
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--set", "max_wall=1e-6", "--out", str(out)]) \
+        == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "max_wall" in err and "LAMMPS run's estimate" in err, err
+    assert not out.exists()
 
 
 def test_no_mpirun_refused_before_any_work(tmp_path, capsys, monkeypatch):
