@@ -2,6 +2,7 @@
 with several ranks) and read its frames, forces and timings back."""
 
 import ctypes
+import itertools
 import json
 import math
 import os
@@ -121,19 +122,31 @@ class LammpsRun:
 
 
 def read_dump(path):
-    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units)."""
+    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units).
+
+    The file is read frame by frame (a large run's dump is many times the size of its arrays)."""
     frames = []
     with open(path) as fh:
-        lines = fh.read().split("\n")
-    k = 0
-    while k < len(lines):
-        if lines[k].startswith("ITEM: TIMESTEP"):
-            step = int(lines[k + 1])
-            n = int(lines[k + 3])
-            cols = lines[k + 8].split()[2:]
-            data = np.loadtxt(lines[k + 9:k + 9 + n], ndmin=2) if n else np.zeros((0, len(cols)))
-            order = np.argsort(data[:, 0])
-            data = data[order]
+        while True:
+            line = fh.readline()
+            if not line:
+                break
+            if not line.startswith("ITEM: TIMESTEP"):
+                continue
+            step = int(fh.readline())
+            fh.readline()                                   # ITEM: NUMBER OF ATOMS
+            n = int(fh.readline())
+            for _ in range(4):                              # ITEM: BOX BOUNDS and its three rows
+                fh.readline()
+            cols = fh.readline().split()[2:]                # ITEM: ATOMS id type x ...
+            if n:
+                data = np.loadtxt(itertools.islice(fh, n), ndmin=2)
+                if len(data) != n:
+                    raise InputError("dump", str(path), f"whole frames (step {step} has {len(data)} of {n} rows: "
+                                     "the run was stopped while writing it)")
+            else:
+                data = np.zeros((0, len(cols)))
+            data = data[np.argsort(data[:, 0], kind="stable")]
             c = {name: i for i, name in enumerate(cols)}
             fr = {"step": step, "id": data[:, c["id"]].astype(np.int64)}
             for key, names in (("positions", ("x", "y", "z")), ("velocities", ("vx", "vy", "vz")),
@@ -144,9 +157,6 @@ def read_dump(path):
             if all(nm in c for nm in vn):
                 fr["stress_atom"] = data[:, [c[nm] for nm in vn]]
             frames.append(fr)
-            k += 9 + n
-        else:
-            k += 1
     return frames
 
 
