@@ -353,6 +353,12 @@ def read_run(folder, wall=float("nan")):
     log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
     loop, thermo, builds = _parse_log(log)
     if not loop:
+        got, meta = _read_progress(folder), folder / META_FILE
+        if got is not None and meta.is_file():          # a run started by run_lammps that did not finish
+            n = json.loads(meta.read_text()).get("nsteps")
+            raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
+                             f"'Loop time'; this run stopped at step {got[0]} of {n}, {PROGRESS_FILE} at "
+                             f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime(got[1]))})")
         raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
                          "'Loop time'; run the deck first)")
     lt, npr, nst, nat = loop[-1]
