@@ -100,6 +100,15 @@ def check_progress(seen, r, folder):
         assert f"step {p.step} of {r.nsteps}" in p.line() and "left" in p.line()
     step, t = (folder / PROGRESS_FILE).read_text().split()
     assert 0 <= int(step) <= r.nsteps
+    # a run that stopped (its log without LAMMPS' closing 'Loop time'): read back, it names the step it reached
+    from clusterdyn.errors import InputError
+    from clusterdyn.io.lammps import read_run
+    log = folder / "log.lammps"
+    text = log.read_text()
+    log.write_text(text[:text.index("Loop time")])
+    with pytest.raises(InputError, match=f"stopped at step {int(step)} of {r.nsteps}"):
+        read_run(folder)
+    log.write_text(text)
 
 
 def wall_scene(two=False):
