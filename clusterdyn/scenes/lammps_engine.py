@@ -461,5 +461,5 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
     return res
 
 
-__all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "LAMMPS_RATE_PER_RANK", "check_engine", "check_wall", "write_decks", "run_scene_lammps", "analyse_scene",
-           "analyse_command", "run_command", "replay"]
+__all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "LAMMPS_RATE_PER_RANK", "check_engine", "check_wall", "write_decks",
+           "run_scene_lammps", "analyse_scene", "analyse_command", "run_command", "replay"]
