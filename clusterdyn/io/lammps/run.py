@@ -306,7 +306,7 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
         cmd = [mpirun, "-np", str(nprocs), *cmd]
     # a child process in both cases: LAMMPS' errors end its process, not ours
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    first, seen = None, None
+    first = None
     try:
         while True:
             try:
@@ -322,8 +322,7 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
             if first is None or step == first[0]:
                 first = (step, t)                 # the rate counts from the first step seen moving
             rate = (step - first[0]) / (t - first[1]) if t > first[1] and step > first[0] else math.nan
-            seen = LammpsProgress(step, nsteps, time.perf_counter() - t0, rate, n_particles, nprocs)
-            progress(seen)
+            progress(LammpsProgress(step, nsteps, time.perf_counter() - t0, rate, n_particles, nprocs))
     except BaseException:
         proc.terminate()                          # mpirun passes it on to its ranks
         try:
