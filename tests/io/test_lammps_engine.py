@@ -170,3 +170,25 @@ def test_the_boundary_law_is_refused_on_lammps_by_name(tmp_path):
                  ["export", "lammps", "spall", "--set", "packing=6061-T6", "--out", str(out)]):
         assert main(argv) == 2
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_lammps_estimate(capsys):
+    """The LAMMPS run's own estimate (particle-steps at LAMMPS_RATE_PER_RANK x ranks): past max_wall refused in one
+    line naming it, past an hour a note; the scenes' numba estimate is dropped while a scene is built for LAMMPS."""
+    import logging
+    from types import SimpleNamespace
+
+    from clusterdyn.errors import InputError
+    from clusterdyn.scenes.base import get_scene
+    from clusterdyn.scenes.lammps_engine import LAMMPS_RATE_PER_RANK, _NoNumbaEstimate, check_wall
+    scene = get_scene("hypervelocity")
+    stages = [SimpleNamespace(atoms=np.zeros(620131), nsteps=16050)]
+    est = 620131 * 16050 / (2 * LAMMPS_RATE_PER_RANK)
+    assert check_wall(scene, {"max_wall": 24.0}, stages, 2) == pytest.approx(est)
+    assert "estimated at" in capsys.readouterr().err                 # 13.8 h: a note
+    with pytest.raises(InputError, match="max_wall") as e:
+        check_wall(scene, {"max_wall": 24.0}, stages, 1)             # 27.6 h on one rank
+    assert "\n" not in str(e.value) and "1 rank" in str(e.value)
+    rec = logging.LogRecord("clusterdyn", logging.WARNING, "impact_common.py", 1, "x", (), None, func="announce_cost")
+    other = logging.LogRecord("clusterdyn", logging.WARNING, "x.py", 1, "x", (), None, func="setup")
+    assert not _NoNumbaEstimate().filter(rec) and _NoNumbaEstimate().filter(other)
