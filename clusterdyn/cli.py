@@ -161,7 +161,7 @@ def _run_lammps(args, overrides, out):
                          "clusterdyn checkpoints)")
     ranks = 1 if args.ranks is None else args.ranks
     got = run_scene_lammps(args.scene, overrides, out, ranks=ranks, deck_only=args.deck_only,
-                           progress=not (args.quiet or args.json))
+                           progress=not args.quiet)     # on stderr, also with --json
     if args.deck_only:
         if args.json:
             print(json.dumps({"decks": [str(f) for f in got], "run": [run_command(f, ranks) for f in got],

