@@ -24,11 +24,13 @@ def test_impact_plates_with_the_law_attach_the_term_and_keep_the_default(tmp_pat
     assert s["relax"]["boundary"]["bonds"] > 0
     # the scenes' stress maps (spall, plate-impact) carry the law's pair stresses
     from clusterdyn.analysis.stress import particle_virials
+    from types import SimpleNamespace
     from clusterdyn.scenes.plate_impact import ImpactRecord
     dyn, atoms = s["dyn"], s["atoms"]
     dyn.run(3)
     term = next(q for q in dyn.pieces if q.adds_forces)
-    W = ImpactRecord(atoms, dyn, {"r0": s["r0"], "v": s["v"], "rear": np.flatnonzero(s["rear"])}).frame(dyn)
+    setup = SimpleNamespace(atoms=atoms, dyn=dyn, r0=s["r0"], v=s["v"], rear=np.flatnonzero(s["rear"]))
+    W = ImpactRecord(setup).frame(dyn)
     total = particle_virials(atoms).sum(axis=0) + term.virial
     assert np.allclose(W.sum(axis=0), total, rtol=1e-10, atol=1e-10 * np.abs(total).max())
     plain = build_impact(**kw)
