@@ -211,6 +211,10 @@ def format_info(path):
                         last, precision=6, separator=", ") if last.ndim else f"{last:.6g}"
                 except Exception:  # a foreign observable layout: list the name only
                     text = "?"
+                if unit == "kJ mol-1" and last is not None:     # H5MD's molecular unit; a sample's energy in J too
+                    joules = np.asarray(last, dtype=float) * (units.kJ / units.mol) / units.J
+                    unit += " (" + (np.array2string(joules, precision=6, separator=", ") if joules.ndim
+                                    else f"{joules:.6g}") + " J)"
                 lines.append(f"  {name:<22s} {text} {unit}".rstrip())
     else:
         lines.append("observables:  -")

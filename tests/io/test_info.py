@@ -34,6 +34,16 @@ def test_format_info(md_file):
     assert "particles:    32 in particles/trajectory, pbc TTT" in text
     assert "0.02 ps" in text
     assert "potential_energy" in text and "kJ mol-1" in text
+    # a sample's energy also in J: the kJ/mol figure converted exactly
+    import re
+    from ase import units
+    from clusterdyn.io import H5MDReader
+    line = next(ln for ln in text.splitlines() if ln.strip().startswith("potential_energy"))
+    kj, joule = map(float, re.match(r"\s*potential_energy\s+(\S+) kJ mol-1 \((\S+) J\)", line).groups())
+    with H5MDReader(path) as r:
+        last = float(r.get_observable("potential_energy")[2][-1])
+    assert kj == float(f"{last:.6g}")
+    assert abs(joule / (last * units.kJ / units.mol / units.J) - 1) < 1e-5
     assert "VelocityVerlet, timestep 2 fs" in text
 
 
