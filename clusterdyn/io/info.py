@@ -106,6 +106,10 @@ def _material_line(m):
     return text
 
 
+#: a drive's running records: its description is written when the file opens, so they read 0 there
+_RECORDS = ("impulse_N_s", "work_J")
+
+
 def _metadata_lines(meta):
     """Lines of ``clusterdyn info`` about the run's metadata."""
     missing = [k for k in ("calculator", "materials", "damping", "constraints") if meta.get(k) is None]
@@ -141,8 +145,9 @@ def _metadata_lines(meta):
                 text = con["class"] + "(" + ", ".join(f"{a}={b}" for a, b in
                                                       con["attributes"].items()) + ")"
             else:
-                text = ", ".join(f"{a}={b}" for a, b in con.items()
-                                 if a not in ("ids", "particles", "n_particles"))
+                text = ", ".join(f"{a}={b}" + (" (at the file's start; the run's are in its observables)"
+                                                if a in _RECORDS else "")
+                                 for a, b in con.items() if a not in ("ids", "particles", "n_particles"))
             n = len(con["ids"]) if con.get("ids") is not None else con.get("n_particles")
             lines.append(("drives:       " if k == 0 else "              ") + text
                          + (f" [acts on {n} particles]" if n is not None else ""))

@@ -57,3 +57,14 @@ def test_info_of_empty_and_missing_files(tmp_path):
         read_h5md(path)
     with pytest.raises(InputError, match="file not found"):
         format_info(tmp_path / "nope.h5md")
+
+
+def test_a_drives_records_are_labelled_as_the_files_start():
+    """A drive's description is written when the file opens: its impulse and work read 0 there, and
+    info says so instead of printing 0 beside the run's force."""
+    from clusterdyn.io.info import _metadata_lines
+    meta = {"constraints": [{"kind": "Piston", "impulse_N_s": [0.0, 0.0, 0.0], "work_J": 0.0,
+                             "n_particles": 4}]}
+    line = next(ln for ln in _metadata_lines(meta) if ln.startswith("drives:"))
+    assert "impulse_N_s=[0.0, 0.0, 0.0] (at the file's start" in line
+    assert "work_J=0.0 (at the file's start" in line and "kind=Piston," in line
