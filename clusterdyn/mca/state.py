@@ -477,20 +477,7 @@ class MCAState:
         self.linked_p = linked
         self.r0_p = np.where(linked == 1, rr, np.concatenate([rr[:nv], old["r0_p"][extra]]))
         self.dlast_pc = np.ascontiguousarray(d)
-        sig = np.zeros((P, 2))
-        tau = np.zeros((P, 2, 3))
-        for side, rows in ((0, rows_i), (1, rows_j)):
-            t = np.einsum("pab,pb->pa", s_ncc[rows], nrm)
-            sn = np.einsum("pa,pa->p", t, nrm)
-            sig[:, side] = sn
-            tau[:, side] = t - sn[:, None] * nrm
-        unl = linked == 0                      # contacts: the contact law sets them afresh
-        sig[unl & surv] = old["sig_p2"][src[unl & surv]]
-        tau[unl & surv] = old["tau_p2c"][src[unl & surv]]
-        sig[unl & ~surv] = 0.0
-        tau[unl & ~surv] = 0.0
-        self.sig_p2 = np.ascontiguousarray(sig)
-        self.tau_p2c = np.ascontiguousarray(tau)
+        self.sig_p2, self.tau_p2c = _inherited_stresses(s_ncc, rows_i, rows_j, nrm, linked, surv, src, old)
         self.D_p = np.where(surv, old["D_p"][np.maximum(src, 0)], 0.0)
         self.count_p = np.where(surv, old["count_p"][np.maximum(src, 0)], 0).astype(np.int64)
         for k in per_pair:
@@ -547,3 +534,22 @@ def _box(atoms):
     box, per = check_cell(atoms.cell.array, atoms.pbc)
     return np.ascontiguousarray(box, dtype=np.float64), np.ascontiguousarray(per, dtype=np.bool_)
 
+
+def _inherited_stresses(s_ncc, rows_i, rows_j, nrm, linked, surv, src, old):
+    """The re-tessellated pairs' stress state (:meth:`MCAState.retessellate`): a linked pair's from
+    its automata's tensors on each side (``sigma = n.s.n``, ``tau = s.n - sigma n``); a contact that
+    survived keeps its own, a new contact starts at zero."""
+    P = len(src)
+    sig = np.zeros((P, 2))
+    tau = np.zeros((P, 2, 3))
+    for side, rows in ((0, rows_i), (1, rows_j)):
+        t = np.einsum("pab,pb->pa", s_ncc[rows], nrm)
+        sn = np.einsum("pa,pa->p", t, nrm)
+        sig[:, side] = sn
+        tau[:, side] = t - sn[:, None] * nrm
+    unl = linked == 0                      # contacts: the contact law sets them afresh
+    sig[unl & surv] = old["sig_p2"][src[unl & surv]]
+    tau[unl & surv] = old["tau_p2c"][src[unl & surv]]
+    sig[unl & ~surv] = 0.0
+    tau[unl & ~surv] = 0.0
+    return np.ascontiguousarray(sig), np.ascontiguousarray(tau)
