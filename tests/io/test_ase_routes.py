@@ -66,10 +66,15 @@ def test_ase_io_read_h5md_through_the_entry_point(tmp_path):
         dyn.run(10)
     # the entry point as pyproject.toml declares it, in a distribution on a temporary path
     ep = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["ase.ioformats"]
-    dist = tmp_path / "site" / "clusterdyn_ep-0.dist-info"
-    dist.mkdir(parents=True)
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: clusterdyn-ep\nVersion: 0\n")
-    (dist / "entry_points.txt").write_text("[ase.ioformats]\n" + "".join(f"{k} = {v}\n" for k, v in ep.items()))
+    from importlib.metadata import entry_points
+    installed = {e.name: e.value for e in entry_points(group="ase.ioformats") if e.name in ep}
+    if installed:       # clusterdyn installed (not only on the path): its own entry point, as declared
+        assert installed == ep
+    else:               # a distribution on a temporary path that declares it
+        dist = tmp_path / "site" / "clusterdyn_ep-0.dist-info"
+        dist.mkdir(parents=True)
+        (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: clusterdyn-ep\nVersion: 0\n")
+        (dist / "entry_points.txt").write_text("[ase.ioformats]\n" + "".join(f"{k} = {v}\n" for k, v in ep.items()))
     code = textwrap.dedent(f"""
         import numpy as np, ase.io
         frames = ase.io.read({str(path)!r}, ':')
