@@ -264,7 +264,8 @@ def profile(cells, steps):
         ("normal + tangential response (trial)", lambda: K.trial_linked(
             i_p, j_p, linked, sig, deps, dB, A_n, D, taurot, dtau, sigt, taut)),
         ("forces, torques, stresses (sums per automaton)", lambda: K.automaton_sums(
-            i_p, j_p, d_pc, r_p, S, q0, arm, sigt, taut, first_n, side_p, side_s, om, G_n, K_n, f, tq, s, e)),
+            i_p, j_p, d_pc, r_p, S, q0, arm, sigt, taut, first_n, side_p, side_s, om, G_n, K_n, n_pc, g_pc, c_pc,
+            f, tq, s, e)),
     ]
     reps = 20
     split = {}

@@ -324,97 +324,9 @@ def trial_contact(i_p, j_p, linked_p, d_pc, r_p, r0_p, q0_p2, M_n, mu_p, taurot_
                            dtau_pc, sigt_p2, taut_p2c)
 
 
-@njit(cache=True, inline="always")
-def _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
-              omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
-    """Item i of :func:`automaton_sums`."""
-    fx = 0.0
-    fy = 0.0
-    fz = 0.0
-    tx = 0.0
-    ty = 0.0
-    tz = 0.0
-    # the tensor sum in nine scalars (no allocation per automaton)
-    s00 = 0.0
-    s01 = 0.0
-    s02 = 0.0
-    s10 = 0.0
-    s11 = 0.0
-    s12 = 0.0
-    s20 = 0.0
-    s21 = 0.0
-    s22 = 0.0
-    for k in range(first_n[i], first_n[i + 1]):
-        p = side_p[k]
-        s = side_s[k]
-        r = r_p[p]
-        nx = d_pc[p, 0] / r
-        ny = d_pc[p, 1] / r
-        nz = d_pc[p, 2] / r
-        S = S_p[p]
-        # stiffness weights of the two sides: w_i = q_i G_j / (q_i G_j + q_j G_i)
-        gi = G_n[i_p[p]]
-        gj = G_n[j_p[p]]
-        wden = q0_p2[p, 0] * gj + q0_p2[p, 1] * gi
-        w0 = q0_p2[p, 0] * gj / wden
-        w1 = 1.0 - w0
-        sb = w0 * sig_p2[p, 0] + w1 * sig_p2[p, 1]
-        tbx = w0 * tau_p2c[p, 0, 0] + w1 * tau_p2c[p, 1, 0]
-        tby = w0 * tau_p2c[p, 0, 1] + w1 * tau_p2c[p, 1, 1]
-        tbz = w0 * tau_p2c[p, 0, 2] + w1 * tau_p2c[p, 1, 2]
-        sgn = 1.0 if s == 0 else -1.0
-        fx += sgn * S * (sb * nx + tbx)
-        fy += sgn * S * (sb * ny + tby)
-        fz += sgn * S * (sb * nz + tbz)
-        a = arm_p2[p, s] * S
-        tx += a * (ny * tbz - nz * tby)
-        ty += a * (nz * tbx - nx * tbz)
-        tz += a * (nx * tby - ny * tbx)
-        w = q0_p2[p, s] * S
-        sg = sig_p2[p, s]
-        tv0 = sg * nx + tau_p2c[p, s, 0]
-        tv1 = sg * ny + tau_p2c[p, s, 1]
-        tv2 = sg * nz + tau_p2c[p, s, 2]
-        s00 += w * tv0 * nx
-        s01 += w * tv0 * ny
-        s02 += w * tv0 * nz
-        s10 += w * tv1 * nx
-        s11 += w * tv1 * ny
-        s12 += w * tv1 * nz
-        s20 += w * tv2 * nx
-        s21 += w * tv2 * ny
-        s22 += w * tv2 * nz
-    f_nc[i, 0] = fx
-    f_nc[i, 1] = fy
-    f_nc[i, 2] = fz
-    t_nc[i, 0] = tx
-    t_nc[i, 1] = ty
-    t_nc[i, 2] = tz
-    inv = 1.0 / omega_n[i]
-    s_ncc[i, 0, 0] = 0.5 * (s00 + s00) * inv
-    v = 0.5 * (s01 + s10) * inv
-    s_ncc[i, 0, 1] = v
-    s_ncc[i, 1, 0] = v
-    v = 0.5 * (s02 + s20) * inv
-    s_ncc[i, 0, 2] = v
-    s_ncc[i, 2, 0] = v
-    s_ncc[i, 1, 1] = 0.5 * (s11 + s11) * inv
-    v = 0.5 * (s12 + s21) * inv
-    s_ncc[i, 1, 2] = v
-    s_ncc[i, 2, 1] = v
-    s_ncc[i, 2, 2] = 0.5 * (s22 + s22) * inv
-    P = (s_ncc[i, 0, 0] + s_ncc[i, 1, 1] + s_ncc[i, 2, 2]) / 3.0
-    ss = 0.0
-    for a in range(3):
-        for b in range(3):
-            dv = s_ncc[i, a, b] - (P if a == b else 0.0)
-            ss += dv * dv
-    e_n[i] = omega_n[i] * (ss / (4.0 * G_n[i]) + P * P / (2.0 * K_n[i]))
-
-
 @njit(cache=True, parallel=True)
 def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s,
-                   omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n):
+                   omega_n, G_n, K_n, n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n):
     """Forces, torques, Love-Weber stress and elastic energy of every automaton.
 
     ``F_i = sum_j S (sigma_bar n_ij + tau_bar)`` with the stiffness-weighted mean over the two
@@ -424,10 +336,15 @@ def automaton_sums(i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, fir
     ``T_i = sum_j q_ij S n_ij x tau_bar`` (MCA 6);
     ``sigma^i = (1/Omega_i) sum_j q_ij S (sigma_ij n + tau_ij) (x) n`` (symmetrised);
     ``e_i = Omega_i (s:s / 4G + P^2 / 2K)`` from that tensor (linear elasticity).
+
+    The per-pair parts once per pair (:func:`_pair_force_one`, buffers ``n_pc``, ``g_pc``, ``c_pc``),
+    then gathered per automaton in its side order (:func:`_gather_one`), as :func:`trial_forces` does.
     """
+    for p in prange(i_p.shape[0]):
+        _pair_force_one(p, i_p, j_p, d_pc, r_p, S_p, q0_p2, sig_p2, tau_p2c, G_n, n_pc, g_pc, c_pc)
     for i in prange(first_n.shape[0] - 1):
-        _sums_one(i, i_p, j_p, d_pc, r_p, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p,
-                  side_s, omega_n, G_n, K_n, f_nc, t_nc, s_ncc, e_n)
+        _gather_one(i, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s, omega_n, G_n, K_n,
+                    n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n)
 
 
 @njit(cache=True, parallel=True)
@@ -579,7 +496,7 @@ def log_volume(d_pc, q0_p2, S_p, linked_p, first_n, side_p, side_s, lnJ_n):
 
 @njit(cache=True, inline="always")
 def _pair_force_one(p, i_p, j_p, d_pc, r_p, S_p, q0_p2, sig_p2, tau_p2c, G_n, n_pc, g_pc, c_pc):
-    """The per-pair parts of :func:`_sums_one`, computed once per pair (not once per side):
+    """The per-pair parts of :func:`automaton_sums`, computed once per pair (not once per side):
     ``n``, ``g = S (sigma_bar n + tau_bar)`` (the force on i; j gets ``-g``) and ``c = n x tau_bar``
     (the torque per lever arm and area), with its operations (the same bits)."""
     r = r_p[p]
@@ -610,7 +527,7 @@ def _pair_force_one(p, i_p, j_p, d_pc, r_p, S_p, q0_p2, sig_p2, tau_p2c, G_n, n_
 @njit(cache=True, inline="always")
 def _gather_one(i, S_p, q0_p2, arm_p2, sig_p2, tau_p2c, first_n, side_p, side_s, omega_n, G_n, K_n,
                 n_pc, g_pc, c_pc, f_nc, t_nc, s_ncc, e_n):
-    """:func:`_sums_one` from the per-pair parts of :func:`_pair_force_one`, gathered in the
+    """Automaton i of :func:`automaton_sums` from the per-pair parts of :func:`_pair_force_one`, gathered in the
     automaton's side order (``(-1) (S X)`` is ``(-S) X`` exactly: the same bits)."""
     fx = 0.0
     fy = 0.0
