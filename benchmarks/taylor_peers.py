@@ -104,16 +104,10 @@ SETUP_LINES = [
 ]
 
 
-def test_label(t):
-    if t["source"].startswith("Gust"):
-        return f"G{t['V_m_s']:g}"
-    return f"WG {t['V_m_s']:g}/L{round(t['L0_mm']):d}"
-
-
 def select_tests(which):
-    from clusterdyn.analysis.impact import ROOM_TEMPERATURE_K, taylor_tests
+    from clusterdyn.analysis.impact import ROOM_TEMPERATURE_K, taylor_test_label, taylor_tests
     room = [t for t in taylor_tests() if t["T0_K"] is None or t["T0_K"] <= ROOM_TEMPERATURE_K]
-    by_label = {test_label(t): t for t in room}
+    by_label = {taylor_test_label(t): t for t in room}
     names = [s for s, _, _ in SEVEN] if which == "seven" else [x.strip() for x in which.split(",") if x.strip()]
     missing = [n for n in names if n not in by_label]
     if missing:
@@ -317,12 +311,13 @@ def child(folder):
 # -- the parent ----------------------------------------------------------------------------------------
 
 def run_one(folder, t, across, rerun=False):
+    from clusterdyn.analysis.impact import taylor_test_label
     folder.mkdir(parents=True, exist_ok=True)
     res_path = folder / "result.json"
     if res_path.exists() and not rerun:
         return json.loads(res_path.read_text()), True
     D0, L0, V = t["D0_mm"], t["L0_mm"], t["V_m_s"]
-    spec = dict(write_deck(folder, D0, L0, V, across), D0=D0, L0=L0, V=V, across=across, test=test_label(t))
+    spec = dict(write_deck(folder, D0, L0, V, across), D0=D0, L0=L0, V=V, across=across, test=taylor_test_label(t))
     (folder / "spec.json").write_text(json.dumps(spec, indent=1))
     env = dict(os.environ, OMP_NUM_THREADS="1")
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
@@ -397,6 +392,7 @@ def fnum(s):
 
 
 def main(argv=None):
+    from clusterdyn.analysis.impact import taylor_test_label
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--across", default="8,10,12", help="particles across D0, even (comma list)")
     ap.add_argument("--tests", default="seven", help="seven or labels like 'WG 373/L23,G200'")
@@ -426,7 +422,7 @@ def main(argv=None):
     for n in across:
         for t in tests:
             k += 1
-            lab = test_label(t)
+            lab = taylor_test_label(t)
             folder = out / f"tlsph_{lab.replace(' ', '').replace('/', '_')}_n{n}"
             if a.report and not (folder / "result.json").exists():
                 continue
@@ -471,10 +467,11 @@ def df_check(out, figdir):
        BETA_TQ W_p / (rho c_p) and the thermal factor 1 - T*^m the runs leave out (at the median and the
        90th percentile of the slab: a few rim particles carry outlying strains).
     """
+    from clusterdyn.analysis.impact import taylor_test_label
     from clusterdyn import units
     from clusterdyn.analysis.impact import taylor_outline
     mm = units.mm
-    tests = {test_label(t): t for t in select_tests("seven") if t.get("has_outline")}
+    tests = {taylor_test_label(t): t for t in select_tests("seven") if t.get("has_outline")}
     mca = read_csv(figdir / "mca_taylor_seven.csv")
     peer = [r for r in read_csv(figdir / "taylor_peers.csv") if r["method"] == "tlsph"]
     print("| test | Df/D0 test | lip: 2 r_exp(1 mm)/D0 | outline volume / initial | method | across | w/2 (mm) "

@@ -321,6 +321,13 @@ def _num(x):
     return float(x) if x else None
 
 
+def taylor_test_label(t):
+    """A Taylor test's short name: 'WG 373/L23' (Wilkins-Guinan, speed, length) or 'G358' (Gust)."""
+    if t["source"].startswith("Gust"):
+        return f"G{t['V_m_s']:g}"
+    return f"WG {t['V_m_s']:g}/L{round(t['L0_mm']):d}"
+
+
 def taylor_tests():
     """The Taylor tests of aluminium 6061-T6 (``clusterdyn/data/taylor_6061t6.csv``).
 

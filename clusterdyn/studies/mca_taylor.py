@@ -18,6 +18,7 @@ import sys
 
 import numpy as np
 
+from ..analysis.impact import taylor_test_label
 from ..errors import InputError
 from ..scenes.base import Param, get_scene
 from .base import Report, Study, register_study
@@ -38,17 +39,10 @@ PARAMS = [
 AIM_LF, AIM_DF = 0.05, 0.10
 
 
-def test_label(t):
-    """'WG 373/L23' (Wilkins-Guinan, speed, length) or 'G358' (Gust)."""
-    if t["source"].startswith("Gust"):
-        return f"G{t['V_m_s']:g}"
-    return f"WG {t['V_m_s']:g}/L{round(t['L0_mm']):d}"
-
-
 def select_tests(which):
     from ..analysis.impact import ROOM_TEMPERATURE_K, taylor_tests
     room = [t for t in taylor_tests() if t["T0_K"] is None or t["T0_K"] <= ROOM_TEMPERATURE_K]
-    by_label = {test_label(t): t for t in room}
+    by_label = {taylor_test_label(t): t for t in room}
     if which == "all":
         return room
     names = [s for s, _, _ in SEVEN] if which == "seven" else [x.strip() for x in which.split(",") if x.strip()]
@@ -65,7 +59,7 @@ def _q(res, key):
 
 def _row(t, across, res, err, wall):
     """One run's row: the measured shape against the test's."""
-    row = {"test": test_label(t), "across": int(across), "V_m_s": t["V_m_s"], "L0_mm": t["L0_mm"],
+    row = {"test": taylor_test_label(t), "across": int(across), "V_m_s": t["V_m_s"], "L0_mm": t["L0_mm"],
            "wall_s": wall, "error": err}
     if res is not None:
         for key, name in (("Lf_over_L0", "Lf"), ("X_over_L0", "X"), ("Df_over_D0", "Df"), ("W_over_D0", "W")):
