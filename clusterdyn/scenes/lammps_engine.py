@@ -168,6 +168,17 @@ def _folders(out, stages):
     return [out if len(stages) == 1 else out / st.name for st in stages]
 
 
+#: LAMMPS restart files written over an engine run (``restart.STEP``, at multiples of the frame cadence)
+RESTARTS_PER_RUN = 10
+
+
+def restart_cadence(nsteps, dump_every):
+    """Steps between LAMMPS restart files: about :data:`RESTARTS_PER_RUN` over the run, a multiple of the
+    frame cadence (a continued run then starts on a dumped frame); None for a run shorter than that."""
+    k = nsteps // (RESTARTS_PER_RUN * dump_every)
+    return None if k < 1 else k * dump_every
+
+
 def write_decks(scene_name, overrides, out, progress=False, ranks=None):
     """Build the scene and write one deck per stage into the folder ``out``, with its engine record.
 
@@ -189,7 +200,8 @@ def write_decks(scene_name, overrides, out, progress=False, ranks=None):
         extra = {"scene": scene.name, "stage": st.name, "params": scene.display(v),
                  "overrides": _jsonable(dict(overrides or {})), "analysis_every": every, "h5md_every": h5}
         export_lammps(st.atoms, st.atoms.calc, st.dyn, folder, nsteps=int(st.nsteps), frames=1, dump_every=dump,
-                      probes=probes, extra=extra, region_removal=True)
+                      probes=probes, extra=extra, region_removal=True,
+                      restart_every=restart_cadence(int(st.nsteps), dump))
     record = {"scene": scene.name, "overrides": _jsonable(dict(overrides or {})),
               "stages": [st.name for st in stages], "folders": [str(f.relative_to(out)) if f != out else "."
                                                                 for f in folders]}

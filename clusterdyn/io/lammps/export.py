@@ -466,7 +466,8 @@ def _dump_lines(frames, every, probes):
 
 
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
-                  seed=12345, skin=None, extra=None, dump_every=None, probes=(), region_removal=False):
+                  seed=12345, skin=None, extra=None, dump_every=None, probes=(), region_removal=False,
+                  restart_every=None):
     """Write ``atoms`` with ``calc`` (ClusterDynamics) and ``dyn`` (DampedVerlet) as a LAMMPS deck.
 
     Parameters
@@ -503,6 +504,9 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         velocity probe, without dumping the whole sample that often); rows
         None: the whole sample with the columns of ``frames.dump`` (e.g. a
         trajectory at another cadence than the analysis frames).
+    restart_every : int, optional
+        Steps between LAMMPS restart files ``restart.STEP`` (``restart N restart.*``), so that a
+        stopped run can be continued from the last one; default none.
 
     Returns
     -------
@@ -558,6 +562,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
         f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
     ]
     lines += _dump_lines(frames, every, probes)
+    if restart_every:
+        lines.append(f"restart         {int(restart_every)} restart.*")
     region = getattr(dyn, "region", None) if region_removal else None
     if region is None:
         lines.append(f"run             {nsteps}")
@@ -571,7 +577,8 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
             "probes": {name: int(pevery) for name, _, pevery in probes},
             "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
-            "skin_A": float(skin), "groups": groups, "attraction": calc.parameters.attraction,
+            "skin_A": float(skin), "restart_every": None if not restart_every else int(restart_every),
+            "groups": groups, "attraction": calc.parameters.attraction,
             "n_bonds": None if bonds is None else int(len(bonds)),
             "tables": [{"a": a, "b": b, "entry": e, "r_lo_A": lo_, "r_hi_A": hi_}
                        for a, b, e, lo_, hi_ in entries],
