@@ -18,7 +18,9 @@ the stepping loop alone (set-up, compilation and the first steps outside the win
   uniaxial velocity ramp of +-10 m/s across x (the sample squeezed elastically; Al6061-T6 yields
   at 0.32 GPa, the ramp stays below it in the window) plus 1 m/s random noise.  The set-up time
   (packing, tessellation, state, dynamics) is measured after the kernels were compiled or loaded
-  on a small sample, and the resident memory added by the sample (VmRSS) per automaton.
+  on a small sample (qhull's share apart), and per automaton: the resident memory the sample adds
+  after its steps (VmRSS, after malloc_trim), the peak during its set-up (VmHWM, qhull's working
+  memory included) and the bytes of the numpy arrays the Atoms, calculator, dynamics and state hold.
 - **CD**: the aluminium piston shock of the CD benchmarks (``build_shock``, [100], u = 3 km/s,
   cross-section 16 x 16 cells, N = 1024 nx), damping off.
 - **LAMMPS BPM** (``bond_style bpm/rotational``), set up as LAMMPS' own example
@@ -97,7 +99,22 @@ def _windows(dyn, natoms, steps, rounds=1):
     return {"rates": r1, "rates2": r2}
 
 
+def _array_bytes(*objs):
+    """Bytes of the numpy arrays an object holds as attributes (one level, dicts of arrays included)."""
+    import numpy as np
+    seen, tot = set(), 0
+    for o in objs:
+        for v in list(vars(o).values()):
+            for a in (v.values() if isinstance(v, dict) else (v,)):
+                if isinstance(a, np.ndarray) and id(a) not in seen:
+                    seen.add(id(a))
+                    tot += a.nbytes
+    return tot
+
+
 def worker_mca(n, steps, rounds):
+    import scipy.spatial
+    from clusterdyn.build import tessellation as T
     t = time.perf_counter()
     _, dyn = _mca_sample(3)             # compile or load every kernel of the step
     dyn.run(5)
@@ -105,15 +122,27 @@ def worker_mca(n, steps, rounds):
     del dyn
     C.trim()
     rss0 = C.status("VmRSS")
+    peak_ok = C.reset_peak()
+    qhull = []
+
+    def voronoi(*a, **k):               # the set-up's qhull time, apart
+        t0 = time.perf_counter()
+        v = scipy.spatial.Voronoi(*a, **k)
+        qhull.append(time.perf_counter() - t0)
+        return v
+    T.Voronoi = voronoi
     t = time.perf_counter()
     at, dyn = _mca_sample(cells_for(n))
     build_s = time.perf_counter() - t
+    peak = C.status("VmHWM") - rss0 if peak_ok else float("nan")
     dyn.run(3)
     out = _windows(dyn, len(at), steps, rounds)
     C.trim()
     rss = C.status("VmRSS") - rss0
+    arrays = _array_bytes(dyn.state, dyn, at.calc) + sum(a.nbytes for a in at.arrays.values())
     out.update({"N": len(at), "pairs": dyn.state.npairs, "build_s": build_s, "compile_s": compile_s,
-                "bytes_per_particle": rss / len(at)})
+                "qhull_s": sum(qhull), "bytes_per_particle": rss / len(at),
+                "peak_bytes_per_particle": peak / len(at), "array_bytes_per_particle": arrays / len(at)})
     return out
 
 
@@ -310,8 +339,12 @@ def summarise(res):
             continue
         note = ""
         if e == "mca":
-            note = (f"set-up {statistics.median(r['build_s'] for r in ok):.1f} s, "
-                    f"{statistics.median(r['bytes_per_particle'] for r in ok):.0f} B/automaton")
+            note = (f"set-up {statistics.median(r['build_s'] for r in ok):.1f} s"
+                    + (f" (qhull {statistics.median(r['qhull_s'] for r in ok):.1f} s)" if "qhull_s" in ok[0] else "")
+                    + f", resident {statistics.median(r['bytes_per_particle'] for r in ok):.0f} B/automaton"
+                    + (f", peak in set-up {statistics.median(r['peak_bytes_per_particle'] for r in ok):.0f}, "
+                       f"arrays {statistics.median(r['array_bytes_per_particle'] for r in ok):.0f}"
+                       if "array_bytes_per_particle" in ok[0] else ""))
         for key, nth in (("rates", 1), ("rates2", 2)):
             if key not in ok[0]:
                 continue

@@ -21,12 +21,23 @@ bulk areas.  This is exact for box samples built by :func:`mca_packing`
 (lattices placed half a layer from the cell faces, random packings packed
 against them); for other shapes carved from a box the surface cells are
 closed at the box faces.
+
+Cost: scipy's Voronoi (qhull) and, per face, compiled passes over the ridges (:func:`_ridge_pass`,
+:func:`_ridge_area_pass`, :func:`_ridge_sums`) that repeat :func:`_polygon_area_3d`'s numpy
+operations in their order and rounding (the per-face Python loop they replace gave the same bits;
+tests/mca/test_tessellation.py).  A 1e5-automaton fcc box: qhull about 40 s, the passes under 1 s.
 """
 
 import hashlib
+import itertools
 import math
+from fractions import Fraction
 
 import numpy as np
+from llvmlite import ir
+from numba import config, njit
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 from scipy.spatial import Voronoi
 
 from ..errors import InputError
@@ -157,50 +168,230 @@ def _tessellate(positions, radius, cell, pbc, dim=3):
             owner = np.concatenate([owner, owner[sel_lo], owner[sel_hi]])
             kind = np.concatenate([kind, np.full(sel_lo.sum() + sel_hi.sum(), 2, np.int8)])
     vor = Voronoi(pts)
-    vert = vor.vertices
-    pairs = {}
+    return _box_geometry(vor, pts, kind, owner, n, dim, cell)
+
+
+def _box_geometry(vor, pts, kind, owner, n, dim, cell):
+    """The pairs and geometry of :func:`_tessellate` from the Voronoi diagram of the automata and
+    their ghosts (compiled passes over the ridges, :func:`_ridge_pass`, :func:`_ridge_area_pass`,
+    :func:`_ridge_sums`)."""
+    rv = vor.ridge_vertices
+    cnt = np.fromiter(map(len, rv), np.int64, count=len(rv))
+    start = np.zeros(len(rv) + 1, np.int64)
+    np.cumsum(cnt, out=start[1:])
+    flat = np.fromiter(itertools.chain.from_iterable(rv), np.int64, count=int(start[-1]))
+    rp = np.ascontiguousarray(vor.ridge_points, np.int64)
+    vert = np.ascontiguousarray(vor.vertices, float)
+    pts = np.ascontiguousarray(pts, float)
+    kind = np.ascontiguousarray(kind, np.int8)
+    xy = np.zeros((2, len(flat)))
+    r_r = np.zeros(len(rv))
+    area = np.zeros(len(rv))
+    rows = np.zeros((len(rv), 2), np.int64)
+    bad = _ridge_pass(pts, kind, rp, start, flat, vert, dim, rows, r_r, area, xy)
+    if bad >= 0:
+        raise InputError("atoms", f"automaton {rows[bad, 0]}",
+                         "a packing whose Voronoi cells are closed by the ghost shell",
+                         hint="is the sample inside its cell?")
+    if dim == 3:
+        ang = np.arctan2(xy[1], xy[0])   # numpy's arctan2 (its own, not libm's: the same bits as before)
+        for k in np.nonzero(_ridge_area_pass(rows, start, xy, ang, area))[0]:
+            area[k] = _polygon_area_3d(vert[flat[start[k]:start[k + 1]]], (pts[rows[k, 1]] - pts[rows[k, 0]])
+                                       / r_r[k])
     vcell = np.zeros(n)
+    key = np.full(len(rv), -1, np.int64)
+    if _ridge_sums(kind, owner, rows, r_r, area, dim, vcell, key) >= 0:
+        raise InputError("cell", cell.diagonal().tolist(), "periodic lengths of at least 3 automaton sizes")
+    keys, first = np.unique(key, return_index=True)     # sorted (i, j); the first ridge of each pair
+    if len(keys) and keys[0] < 0:
+        keys, first = keys[1:], first[1:]
+    i_p = keys // n
+    j_p = keys - i_p * n
+    S = area[first]
+    q = 0.5 * r_r[first]
+    q2 = np.stack([q, q], axis=1)
     omega = np.zeros(n)
-    for (a, b), rv in zip(vor.ridge_points, vor.ridge_vertices):
-        ka, kb = kind[a], kind[b]
-        if ka != 0 and kb != 0:
+    _pyramid_sums(i_p, j_p, S, q2, dim, omega)
+    return {"i_p": i_p, "j_p": j_p, "S_p": S, "q_p2": q2, "omega_n": omega, "vcell_n": vcell}
+
+
+@intrinsic
+def _fma_ir(typingctx, x, y, z):
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
+        return builder.call(fn, args)
+    return sig, codegen
+
+
+def _fma_python(x, y, z):
+    return float(Fraction(x) * Fraction(y) + Fraction(z))   # exact, then rounded once
+
+
+#: ``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``; exact rationals under NUMBA_DISABLE_JIT): the
+#: passes below repeat numpy's operations of :func:`_polygon_area_3d` in their order and rounding,
+#: and numpy's short dot products (``np.dot``, ``np.linalg.norm``, ``@`` of a 3-vector: OpenBLAS'
+#: ``ddot``/``dgemv`` below 16 terms) are chains of fused multiply-adds
+_fma = _fma_python if config.DISABLE_JIT else _fma_ir
+
+
+@njit(cache=True)
+def _dot_fma(a0, a1, a2, b0, b1, b2):
+    """``np.dot`` of two 3-vectors (OpenBLAS ddot): a fused chain from 0."""
+    return _fma(a2, b2, _fma(a1, b1, a0 * b0))
+
+
+@njit(cache=True)
+def _ridge_pass(pts, kind, rp, start, flat, vert, dim, rows, r_r, area, xy):
+    """Per ridge with a real automaton: its rows (the real one first), the distance of the two
+    centres, and (3D) the face's vertices in the face's frame of :func:`_polygon_area_3d` (into
+    ``xy``), (2D) the edge length into ``area``.  Rows of ridges between two ghosts are -1.
+    Returns the first ridge with an unbounded vertex, or -1."""
+    for k in range(rp.shape[0]):
+        a = rp[k, 0]
+        b = rp[k, 1]
+        if kind[a] != 0 and kind[b] != 0:
+            rows[k, 0] = -1
+            rows[k, 1] = -1
             continue
-        if ka != 0:          # make a the real one
-            a, b, ka, kb = b, a, kb, ka
-        d = pts[b] - pts[a]
-        r = float(np.linalg.norm(d))
-        nvec = d / r
-        if -1 in rv:
-            raise InputError("atoms", f"automaton {a}",
-                             "a packing whose Voronoi cells are closed by the ghost shell",
-                             hint="is the sample inside its cell?")
-        vv = vert[rv]
-        if dim == 3:
-            area = _polygon_area_3d(vv, nvec)
-        else:
-            area = float(np.linalg.norm(vv[1] - vv[0]))
-        q = 0.5 * r
-        vcell[a] += q * area / dim
+        if kind[a] != 0:
+            a, b = b, a
+        rows[k, 0] = a
+        rows[k, 1] = b
+        s0 = start[k]
+        s1 = start[k + 1]
+        for m in range(s0, s1):
+            if flat[m] < 0:
+                return k
+        if dim == 2:
+            d0 = pts[b, 0] - pts[a, 0]
+            d1 = pts[b, 1] - pts[a, 1]
+            r_r[k] = math.sqrt(_fma(d1, d1, d0 * d0))
+            e0 = vert[flat[s0 + 1], 0] - vert[flat[s0], 0]
+            e1 = vert[flat[s0 + 1], 1] - vert[flat[s0], 1]
+            area[k] = math.sqrt(_fma(e1, e1, e0 * e0))
+            continue
+        d0 = pts[b, 0] - pts[a, 0]
+        d1 = pts[b, 1] - pts[a, 1]
+        d2 = pts[b, 2] - pts[a, 2]
+        r = math.sqrt(_dot_fma(d0, d1, d2, d0, d1, d2))
+        r_r[k] = r
+        n0 = d0 / r
+        n1 = d1 / r
+        n2 = d2 / r
+        K = s1 - s0
+        c0 = vert[flat[s0], 0]
+        c1 = vert[flat[s0], 1]
+        c2 = vert[flat[s0], 2]
+        for m in range(s0 + 1, s1):
+            c0 = c0 + vert[flat[m], 0]
+            c1 = c1 + vert[flat[m], 1]
+            c2 = c2 + vert[flat[m], 2]
+        c0 = c0 / K
+        c1 = c1 / K
+        c2 = c2 / K
+        u0 = vert[flat[s0], 0] - c0
+        u1 = vert[flat[s0], 1] - c1
+        u2 = vert[flat[s0], 2] - c2
+        un = math.sqrt(_dot_fma(u0, u1, u2, u0, u1, u2))
+        if un == 0.0:
+            u0 = vert[flat[s0 + 1], 0] - c0
+            u1 = vert[flat[s0 + 1], 1] - c1
+            u2 = vert[flat[s0 + 1], 2] - c2
+            un = math.sqrt(_dot_fma(u0, u1, u2, u0, u1, u2))
+        u0 = u0 / un
+        u1 = u1 / un
+        u2 = u2 / un
+        v0 = n1 * u2 - n2 * u1
+        v1 = n2 * u0 - n0 * u2
+        v2 = n0 * u1 - n1 * u0
+        for m in range(s0, s1):
+            e0 = vert[flat[m], 0] - c0
+            e1 = vert[flat[m], 1] - c1
+            e2 = vert[flat[m], 2] - c2
+            # (pts - c) @ u: OpenBLAS dgemv's fused order for three columns, added to y = +0
+            # (a -0 becomes +0: it decides arctan2's -pi or +pi and so the vertex order)
+            xy[0, m] = 0.0 + _fma(e2, u2, _fma(e0, u0, e1 * u1))
+            xy[1, m] = 0.0 + _fma(e2, v2, _fma(e0, v0, e1 * v1))
+    return -1
+
+
+@njit(cache=True)
+def _ridge_area_pass(rows, start, xy, ang, area):
+    """3D face areas: the vertices sorted by angle, the shoelace sum as :func:`_polygon_area_3d`
+    forms it.  Returns a mask of the ridges left to that function (16 or more vertices, where
+    numpy's dot is another kernel, or two different vertices at the same angle, where the order
+    numpy's sort gives is its own)."""
+    nr = rows.shape[0]
+    left = np.zeros(nr, np.bool_)
+    order = np.empty(64, np.int64)
+    for k in range(nr):
+        if rows[k, 0] < 0:
+            continue
+        s0 = start[k]
+        K = start[k + 1] - s0
+        if K >= 16:
+            left[k] = True
+            continue
+        for m in range(K):          # insertion sort by angle
+            t = m
+            while t > 0 and ang[s0 + order[t - 1]] > ang[s0 + m]:
+                order[t] = order[t - 1]
+                t -= 1
+            order[t] = m
+        tie = False
+        for m in range(1, K):
+            p = s0 + order[m - 1]
+            q = s0 + order[m]
+            if ang[p] == ang[q] and (xy[0, p] != xy[0, q] or xy[1, p] != xy[1, q]):
+                tie = True
+        if tie:
+            left[k] = True
+            continue
+        dxy = 0.0
+        dyx = 0.0
+        for m in range(K):
+            p = s0 + order[m]
+            q = s0 + order[(m + 1) % K]
+            dxy = _fma(xy[1, q], xy[0, p], dxy)       # np.dot(x, np.roll(y, -1))
+            dyx = _fma(xy[0, q], xy[1, p], dyx)       # np.dot(y, np.roll(x, -1))
+        area[k] = 0.5 * abs(dxy - dyx)
+    return left
+
+
+@njit(cache=True)
+def _ridge_sums(kind, owner, rows, r_r, area, dim, vcell, key):
+    """Clipped cell volumes ``vcell`` (pyramids of every face with an automaton, in ridge order)
+    and per ridge the pair key ``min * n + max`` of its two automata (-1: a ghost-ghost or free
+    surface face).  Returns the first ridge of an automaton with its own periodic image, or -1."""
+    n = vcell.shape[0]
+    for k in range(rows.shape[0]):
+        a = rows[k, 0]
+        if a < 0:
+            continue
+        b = rows[k, 1]
+        q = 0.5 * r_r[k]
+        vcell[a] += q * area[k] / dim
+        kb = kind[b]
         if kb == 2:
-            continue            # free surface: a face with a mirror image
+            continue
         j = owner[b]
         if kb == 0:
-            vcell[b] += q * area / dim
+            vcell[b] += q * area[k] / dim
         if j == a:
-            raise InputError("cell", cell.diagonal().tolist(),
-                             "periodic lengths of at least 3 automaton sizes")
-        key = (min(a, j), max(a, j))
-        if key in pairs:
-            continue
-        pairs[key] = (area, q, q)
-    keys = np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
-    S = np.array([pairs[tuple(k)][0] for k in keys])
-    q2 = np.array([pairs[tuple(k)][1:] for k in keys]).reshape(-1, 2)
-    for (i, j), s, (qi, qj) in zip(keys, S, q2):
-        omega[i] += qi * s / dim
-        omega[j] += qj * s / dim
-    return {"i_p": keys[:, 0].copy(), "j_p": keys[:, 1].copy(), "S_p": S, "q_p2": q2,
-            "omega_n": omega, "vcell_n": vcell}
+            return k
+        key[k] = min(a, j) * n + max(a, j)
+    return -1
+
+
+@njit(cache=True)
+def _pyramid_sums(i_p, j_p, S, q2, dim, omega):
+    """``Omega_i = (1/D) sum_j q_ij S_ij`` in pair order."""
+    for p in range(i_p.shape[0]):
+        omega[i_p[p]] += q2[p, 0] * S[p] / dim
+        omega[j_p[p]] += q2[p, 1] * S[p] / dim
 
 
 def consistency(geom, positions, cell, pbc, dim=3):
