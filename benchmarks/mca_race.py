@@ -3,6 +3,7 @@ by phase.
 
     python benchmarks/mca_race.py --sizes 1e4 --repeat 3              # 3 interleaved processes
     python benchmarks/mca_race.py --sizes 1e5 --repeat 1 --rounds 3   # one build, 3 timed rounds
+    python benchmarks/mca_race.py --sizes 1e6 --repeat 1 --rounds 3 --steps 5 --peer-steps 3
     python benchmarks/mca_race.py --sizes 1e4 --repeat 3 --steps 60
     python benchmarks/mca_race.py --profile 11           # the MCA step by phase, 11^3 fcc cells (5 324)
 
@@ -371,6 +372,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--steps", type=int, default=0, help="steps per window (default: 2e6 / N, at least 10)")
     ap.add_argument("--engines", default="mca,cd,bpm,peri")
+    ap.add_argument("--peer-steps", type=int, default=0,
+                    help="steps per window for the LAMMPS engines (default: --steps); rates are per step")
     ap.add_argument("--profile", type=int, default=0, help="profile the MCA step on this many fcc cells a side")
     ap.add_argument("--from-log", help="summarise the lines a run printed (a run's stdout)")
     ap.add_argument("--worker")
@@ -412,8 +415,11 @@ def main():
     for rep in range(a.repeat):
         for (e, n, th) in configs:
             steps = a.steps or max(10, int(2e6 / n))
+            if e in ("bpm", "peri") and a.peer_steps:
+                steps = a.peer_steps
             r = run_worker(e, n, steps, a.rounds)
             r["load"] = os.getloadavg()[0]
+            r["steps"] = steps
             res[(e, n, th)].append(r)
             print(rep, e, n, th, json.dumps(r), flush=True)
     out, lines = summarise(res)
