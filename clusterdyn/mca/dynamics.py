@@ -414,10 +414,10 @@ class MCADynamics(MolecularDynamics):
         st = self.state
         dt = self.dt
         h = 0.5 * dt
-        m = atoms.get_masses()[:, None]
-        J = self.J[:, None]
-        p = atoms.get_momenta()
-        w = atoms.arrays["omega"].copy()
+        m = atoms.get_masses()
+        J = self.J
+        p = np.ascontiguousarray(atoms.get_momenta(), dtype=np.float64)
+        w = np.array(atoms.arrays["omega"], dtype=np.float64, order="C")
         F0, T0 = self._F, self._T
         Fe, Te = F0, T0
         if self.damping > 0:                   # the damping of the last evaluation (half-step velocities)
@@ -430,16 +430,14 @@ class MCADynamics(MolecularDynamics):
         Fe = self._constrained(Fe)             # the step's start: a drive records only its first sample
         for d in drives:
             d.begin_step()
-        p += h * Fe
-        w += h * Te / J
+        K.half_kick(p, w, _c64(Fe), _c64(Te), J, h)
         self._constrain_motion(p, w)
         if st.dim == 2:
             p[:, 2] = 0.0
             w[:, :2] = 0.0
-        dx = dt * (p / m)
-        dth = dt * w
-        atoms.set_positions(atoms.positions + dx, apply_constraint=False)
-        atoms.arrays["theta"] += dth
+        dx = np.empty_like(p)
+        dth = np.empty_like(w)
+        K.drift(p, m, w, dt, _own(atoms, "positions"), _own(atoms, "theta"), dx, dth)
         for d in drives:
             d.end_drift()
         st.step += 1
@@ -449,7 +447,8 @@ class MCADynamics(MolecularDynamics):
         out = self._evaluate(commit=True)
         F1, T1 = self._F, self._T
         f_tr = out_f_trial(out, F1)
-        self.stored_work -= 0.5 * (np.sum((F0 + f_tr) * dx) + np.sum((T0 + T1) * dth))
+        self.stored_work -= 0.5 * (K.sum_of_products(_c64(F0), _c64(f_tr), dx)
+                                   + K.sum_of_products(_c64(T0), _c64(T1), dth))
         if f_tr is not F1:                     # the kick uses the corrected forces (O(dt) term)
             self.split_work += 0.5 * float(np.sum((f_tr - F1) * dx))
         if self.remeshing and self._remesh_due(out):
@@ -458,18 +457,17 @@ class MCADynamics(MolecularDynamics):
         self._check(out)
         Fe, Te = F1, T1
         if self.damping > 0:
-            fd, td = self._damping_forces(p / m, w)
+            fd, td = self._damping_forces(p / m[:, None], w)
             Fe, Te = F1 + fd, T1 + td
             self.dissipated -= 0.5 * (np.sum((fd0 + fd) * dx) + np.sum((td0 + td) * dth))
             self._Fd, self._Td = fd, td
         if self._friction_on:
-            ff, tf = self.contact.friction(atoms, st, p / m, w, dt, advance=True)
+            ff, tf = self.contact.friction(atoms, st, p / m[:, None], w, dt, advance=True)
             Fe, Te = Fe + ff, Te + tf
             self.contact.friction_work -= 0.5 * (np.sum((ff0 + ff) * dx) + np.sum((tf0 + tf) * dth))
             self._Ff, self._Tf = ff, tf
         Fe = self._constrained(Fe)             # the drives record their forces at the step's end
-        p += h * Fe
-        w += h * Te / J
+        K.half_kick(p, w, _c64(Fe), _c64(Te), J, h)
         self._constrain_motion(p, w)
         if st.dim == 2:
             p[:, 2] = 0.0
@@ -711,6 +709,20 @@ class MCADynamics(MolecularDynamics):
             if "friction_forces" in d and self._friction_on:
                 self._Ff = np.array(d["friction_forces"], dtype=float)
                 self._Tf = np.array(d["friction_torques"], dtype=float)
+
+
+def _c64(a):
+    """``a`` as a C-contiguous float64 array (itself when it is one already)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _own(atoms, name):
+    """``atoms.arrays[name]`` for the step to update in place: made a C-contiguous float64 array of
+    its own first if it is not one (as ``set_array`` would keep it)."""
+    a = atoms.arrays[name]
+    if not (a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable):
+        a = atoms.arrays[name] = np.array(a, dtype=np.float64, order="C")
+    return a
 
 
 def out_f_trial(out, F1):

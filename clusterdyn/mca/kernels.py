@@ -666,3 +666,125 @@ def max_linked_strain(r_p, r0_p, linked_p):
             m = s
             k = p
     return m, k
+
+
+# --------------------------------------------------------------------------------- the step's arithmetic
+# MCADynamics.step's element-wise updates and energy sums in one pass each, with numpy's operations in
+# numpy's order (the same bits as the array expressions they replace: tests/mca/test_step_kernels.py)
+
+@njit(cache=True)
+def half_kick(p_nc, w_nc, F_nc, T_nc, J_n, h):
+    """``p += h F`` and ``w += h T / J`` (numpy's ``(h T) / J``), in place."""
+    for i in range(p_nc.shape[0]):
+        for a in range(3):
+            p_nc[i, a] = p_nc[i, a] + h * F_nc[i, a]
+            w_nc[i, a] = w_nc[i, a] + h * T_nc[i, a] / J_n[i]
+
+
+@njit(cache=True)
+def drift(p_nc, m_n, w_nc, dt, pos_nc, theta_nc, dx_nc, dth_nc):
+    """``dx = dt (p / m)``, ``dth = dt w``; ``pos += dx``, ``theta += dth`` in place."""
+    for i in range(p_nc.shape[0]):
+        for a in range(3):
+            dx = dt * (p_nc[i, a] / m_n[i])
+            dx_nc[i, a] = dx
+            pos_nc[i, a] = pos_nc[i, a] + dx
+            dth = dt * w_nc[i, a]
+            dth_nc[i, a] = dth
+            theta_nc[i, a] = theta_nc[i, a] + dth
+
+
+@njit(cache=True)
+def _pairwise_block(a, b, c, s, n):
+    """numpy's pairwise sum of a block of ``n <= 128`` elements ``(a + b) * c`` from flat index ``s``:
+    in order below 8, else 8 partial sums combined as a tree, then the remainder in order."""
+    if n < 8:
+        r = -0.0
+        for k in range(s, s + n):
+            r += (a[k] + b[k]) * c[k]
+        return r
+    r0 = (a[s] + b[s]) * c[s]
+    r1 = (a[s + 1] + b[s + 1]) * c[s + 1]
+    r2 = (a[s + 2] + b[s + 2]) * c[s + 2]
+    r3 = (a[s + 3] + b[s + 3]) * c[s + 3]
+    r4 = (a[s + 4] + b[s + 4]) * c[s + 4]
+    r5 = (a[s + 5] + b[s + 5]) * c[s + 5]
+    r6 = (a[s + 6] + b[s + 6]) * c[s + 6]
+    r7 = (a[s + 7] + b[s + 7]) * c[s + 7]
+    m = n - n % 8
+    k = s + 8
+    while k < s + m:
+        r0 += (a[k] + b[k]) * c[k]
+        r1 += (a[k + 1] + b[k + 1]) * c[k + 1]
+        r2 += (a[k + 2] + b[k + 2]) * c[k + 2]
+        r3 += (a[k + 3] + b[k + 3]) * c[k + 3]
+        r4 += (a[k + 4] + b[k + 4]) * c[k + 4]
+        r5 += (a[k + 5] + b[k + 5]) * c[k + 5]
+        r6 += (a[k + 6] + b[k + 6]) * c[k + 6]
+        r7 += (a[k + 7] + b[k + 7]) * c[k + 7]
+        k += 8
+    r = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while k < s + n:
+        r += (a[k] + b[k]) * c[k]
+        k += 1
+    return r
+
+
+@njit(cache=True)
+def sum_of_products(a_nc, b_nc, c_nc):
+    """``np.sum((a + b) * c)`` of C-contiguous arrays of one shape, without the temporaries, in
+    numpy's summation order (``np.add.reduce`` of a contiguous array: blocks of at most 128 by
+    :func:`_pairwise_block`, larger ranges split in halves rounded to 8 and added left + right), so
+    the same bits.  The halving runs on an explicit stack (numba's disk cache does not keep
+    recursive functions)."""
+    a = a_nc.reshape(-1)
+    b = b_nc.reshape(-1)
+    c = c_nc.reshape(-1)
+    n = a.size
+    if n <= 128:
+        return _pairwise_block(a, b, c, 0, n)
+    f_s = np.empty(64, np.int64)        # frames: start, length, phase (0 new, 1 left pending,
+    f_n = np.empty(64, np.int64)        # 2 right pending), the left half's sum
+    f_h = np.empty(64, np.int64)
+    f_l = np.empty(64)
+    f_s[0] = 0
+    f_n[0] = n
+    f_h[0] = 0
+    sp = 1
+    val = 0.0
+    have = False                        # ``val`` is a finished half for the top frame
+    while True:
+        t = sp - 1
+        if have:
+            if f_h[t] == 1:
+                f_l[t] = val
+                f_h[t] = 2
+                n2 = f_n[t] // 2
+                n2 -= n2 % 8
+                s2 = f_s[t] + n2
+                m2 = f_n[t] - n2
+                if m2 <= 128:
+                    val = _pairwise_block(a, b, c, s2, m2)
+                else:
+                    have = False
+                    f_s[sp] = s2
+                    f_n[sp] = m2
+                    f_h[sp] = 0
+                    sp += 1
+            else:
+                val = f_l[t] + val
+                sp -= 1
+                if sp == 0:
+                    return val
+            continue
+        n2 = f_n[t] // 2
+        n2 -= n2 % 8
+        f_h[t] = 1
+        if n2 <= 128:
+            val = _pairwise_block(a, b, c, f_s[t], n2)
+            have = True
+        else:
+            f_s[sp] = f_s[t]
+            f_n[sp] = n2
+            f_h[sp] = 0
+            sp += 1
