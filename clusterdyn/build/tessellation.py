@@ -71,7 +71,9 @@ def _cached(kind, key, make):
 
 
 def _polygon_area_3d(pts, normal):
-    """Area of a convex planar polygon given by unordered vertices (K, 3)."""
+    """Area of a convex planar polygon given by unordered vertices (K, 3): the definition the
+    compiled passes (:func:`_ridge_pass`, :func:`_ridge_area_pass`) follow operation by operation,
+    and their fallback for the faces they leave."""
     c = pts.mean(axis=0)
     u = pts[0] - c
     if np.linalg.norm(u) == 0:
