@@ -11,7 +11,8 @@ import numpy as np
 from ... import units
 from ...errors import InputError
 
-__all__ = ["export_lammps", "deck_lines", "run_boundaries", "check_deck", "drive_lines", "pair_lines", "write_data", "write_tables",
+__all__ = ["export_lammps", "deck_lines", "run_boundaries", "check_deck", "drive_lines", "pair_lines", "write_data",
+           "write_tables",
            "initial_bond_pairs", "type_masses", "aligned_points", "table_grid", "table_entry_name",
            "lammps_table_forces", "table_interpolation_error"]
 

@@ -132,8 +132,8 @@ def write_resume(atoms, calc, dyn, folder, **deck):
     :func:`~clusterdyn.io.lammps.export.export_lammps` that wrote the folder's deck): the deck they write
     must be the folder's ``in.cd``, line for line, else refused.  Refused in one line naming the folder:
     no ``in.cd``, a different deck, no whole restart file.  With pair damping the run's frame at the
-    restart step is copied to ``restart.STEP.forces`` (the continuation's first forces,
-    :func:`~clusterdyn.io.lammps.export._force_lines`)."""
+    restart step is copied to ``restart.STEP.forces`` (the continuation's first forces:
+    :func:`~clusterdyn.io.lammps.export.deck_lines`)."""
     folder = Path(folder)
     deck.pop("extra", None)
     if not (folder / INPUT_FILE).is_file():
