@@ -519,20 +519,19 @@ def _table_entries(calc, remainder):
     return out
 
 
-def _force_lines(step, forces_file):
+def _force_lines(step, forces):
     """A continuation's first forces made those of the stopped run at its restart step.
 
     LAMMPS' set-up computes the forces afresh with the full-step velocities, where the run computed them
     within the step with the half-step ones (velocity Verlet): the pair damping differs by O(dt).  The
-    forces the run dumped at that step (``forces_file``, its frame of frames.dump) are read back and
-    ``fix addforce`` adds the difference at the set-up only (``step == S``; it is evaluated at the
-    multiples of S only, and adds zero there).  Defined after every other fix, so the forces it sees
-    are the pair forces plus the walls'."""
+    forces the run dumped at that step are read back per atom id (``forces``: the prefix of the three
+    ``atomfile`` files ``PREFIXx``, ``PREFIXy``, ``PREFIXz``; atomfile variables move with their atoms
+    between ranks, as a read-in force would not) and ``fix addforce`` adds the difference at the set-up
+    only (``step == S``; it is evaluated at the multiples of S only, and adds zero there).  Defined after
+    every other fix, so the forces it sees are the pair forces plus the walls'."""
     s = int(step)
-    lines = [f"read_dump       {forces_file} {s} fx fy fz box no",
-             "fix             cdf_restart all store/state 0 fx fy fz"]
-    for k, ax in enumerate("xyz"):
-        lines.append(f"variable        cdf{ax} atom (f_cdf_restart[{k + 1}]-f{ax})*(step=={s})")
+    lines = [f"variable        cdf0{ax} atomfile {forces}{ax}" for ax in "xyz"]
+    lines += [f"variable        cdf{ax} atom (v_cdf0{ax}-f{ax})*(step=={s})" for ax in "xyz"]
     lines.append(f"fix             cdf_fix all addforce v_cdfx v_cdfy v_cdfz every {s}")
     return lines
 
@@ -610,7 +609,7 @@ def deck_lines(atoms, calc, dyn, *, nsteps=None, frames=20, n_points=DEFAULT_TAB
         lines += _removal_setup(region, interval, layers, after=resume)
     if resume is not None and J is not None and int(resume) not in run_boundaries(nsteps, interval):
         if resume_forces is None:
-            raise InputError("resume_forces", None, "the file of the run's frame at the restart step (pair damping)")
+            raise InputError("resume_forces", None, "the files of the run's forces at the restart step (pair damping)")
         lines += _force_lines(resume, resume_forces)
     lines += _run_lines(nsteps, interval, bonds=initial, start=0 if resume is None else int(resume))
     if frames and nsteps and nsteps % every:

@@ -125,14 +125,32 @@ def cut_dump(path, step):
     return size - cut
 
 
+def _write_forces(dump, step, prefix):
+    """The forces of the dump's frame at ``step`` as three LAMMPS ``atomfile`` files ``PREFIXx`` etc.
+    ("id value" lines, the dump's own text: no rounding)."""
+    pos, end = _frame_at(dump, step)
+    with open(dump, "rb") as fh:
+        fh.seek(pos)
+        lines = fh.read(end - pos).decode().split("\n")
+    cols = lines[8].split()[2:]
+    n = int(lines[3])
+    rows = [ln.split() for ln in lines[9:9 + n]]
+    i = cols.index("id")
+    for ax in "xyz":
+        k = cols.index(f"f{ax}")
+        text = "".join(f"{r[i]} {r[k]}\n" for r in rows)
+        Path(f"{prefix}{ax}").write_text(f"# forces f{ax} at step {step} (eV/Angstrom), from {dump.name}\n{n}\n"
+                                         + text)
+
+
 def write_resume(atoms, calc, dyn, folder, **deck):
     """Write the continuation of a stopped deck from its newest whole restart file; returns its step.
 
     ``atoms``, ``calc``, ``dyn`` and ``deck`` (the keyword arguments of
     :func:`~clusterdyn.io.lammps.export.export_lammps` that wrote the folder's deck): the deck they write
     must be the folder's ``in.cd``, line for line, else refused.  Refused in one line naming the folder:
-    no ``in.cd``, a different deck, no whole restart file.  With pair damping the run's frame at the
-    restart step is copied to ``restart.STEP.forces`` (the continuation's first forces:
+    no ``in.cd``, a different deck, no whole restart file.  With pair damping the run's forces at the
+    restart step are written to ``restart.STEP.fx``, ``.fy``, ``.fz`` (the continuation's first forces:
     :func:`~clusterdyn.io.lammps.export.deck_lines`)."""
     folder = Path(folder)
     deck.pop("extra", None)
@@ -154,11 +172,8 @@ def write_resume(atoms, calc, dyn, folder, **deck):
         cut_dump(p, step)
     forces = None
     if info.J is not None and (folder / "frames.dump").is_file():
-        pos, end = _frame_at(folder / "frames.dump", step)
-        forces = f"restart.{step}.forces"
-        with open(folder / "frames.dump", "rb") as src, open(folder / forces, "wb") as dst:
-            src.seek(pos)
-            dst.write(src.read(end - pos))
+        forces = f"restart.{step}.f"
+        _write_forces(folder / "frames.dump", step, folder / forces)
     lines, _ = deck_lines(atoms, calc, dyn, resume=step, resume_forces=forces, **deck)
     (folder / RESUME_FILE).write_text("\n".join(lines) + "\n")
     return step
