@@ -460,7 +460,7 @@ def resume_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, pr
     Refused in one line naming the folder: not an engine run, a stage with no restart file, every stage
     finished.  ``deck_only``: the continuation decks are written and returned as ``[(folder, step)]``
     (step None: the stage's first deck), nothing run."""
-    from ..io.lammps.resume import write_resume
+    from ..io.lammps.resume import resumable, write_resume
     from ..io.lammps.run import LOG_FILE, read_run, run_finished, run_lammps, stderr_progress
     ranks = _check_ranks(ranks, deck_only)
     if out is None:
@@ -471,20 +471,26 @@ def resume_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, pr
         raise InputError("--set", " ".join(f"{k}={x}" for k, x in overrides.items()),
                          f"the parameters {out} ran with, or none (--resume continues its decks)",
                          hint=f"it ran with {rec['overrides'] or 'the defaults'}")
+    folders = [out if f == "." else out / f for f in rec["folders"]]
+    if all(run_finished(f) for f in folders):               # refusals before the scene is built
+        raise InputError("DIR", str(out), "a stopped LAMMPS engine run (every stage finished: analyse it with "
+                         f"{analyse_command(scene_name, out)})")
+
+    def started(folder):
+        return (folder / LOG_FILE).exists() or any(folder.glob("restart.*"))
+    for f in folders:
+        if not run_finished(f) and started(f):
+            resumable(f)
     scene = get_scene(scene_name)
     v = scene.parse(rec["overrides"])
     skipped = check_engine(scene, rec["overrides"], v)
     scene.check(v)
     stages = _stages(scene, v)
-    folders = _folders(out, stages)
-    if all(run_finished(f) for f in folders):
-        raise InputError("DIR", str(out), "a stopped LAMMPS engine run (every stage finished: analyse it with "
-                         f"{analyse_command(scene.name, out)})")
     plan = []
     for st, folder in zip(stages, folders):
         if run_finished(folder):
             plan.append((folder, "done"))
-        elif not (folder / LOG_FILE).exists() and not any(folder.glob("restart.*")):
+        elif not started(folder):
             plan.append((folder, None))                     # not started: its first deck
         else:
             plan.append((folder, write_resume(st.atoms, st.atoms.calc, st.dyn, folder,

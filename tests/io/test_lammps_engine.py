@@ -243,10 +243,13 @@ def test_resume_from_restart_file(tmp_path, hv_lammps, restart, step, ranks):
     assert r["extra"]["engine"]["ranks"] == ranks
 
 
-def test_resume_refused_in_one_line(tmp_path, hv_lammps, capsys):
-    """No restart file, not an engine run, a finished run, --resume without LAMMPS: one line naming the
-    folder (or the option), exit 2."""
+def test_resume_refused_in_one_line(tmp_path, hv_lammps, capsys, monkeypatch):
+    """No restart file, not an engine run, a finished run, other parameters, --resume without LAMMPS: one
+    line naming the folder (or the option), exit 2, before the scene is built."""
     import shutil
+
+    import clusterdyn.scenes.lammps_engine as engine
+    monkeypatch.setattr(engine, "_stages", lambda *a: pytest.fail("the scene was built before the refusal"))
     bare = tmp_path / "bare"
     shutil.copytree(hv_lammps, bare)
     for p in bare.glob("restart.*"):
@@ -260,6 +263,9 @@ def test_resume_refused_in_one_line(tmp_path, hv_lammps, capsys):
             == EXIT_INPUT
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and str(folder) in err and words in err, err
+    assert main(["run", "hypervelocity", *HV, "--set", "r0=1mm", "--out", str(bare), "--engine", "lammps",
+                 "--resume"]) == EXIT_INPUT
+    assert "--set" in capsys.readouterr().err
     assert main(["run", "hypervelocity", "--out", str(bare), "--resume"]) == EXIT_INPUT
     assert "only with --engine lammps" in capsys.readouterr().err
 

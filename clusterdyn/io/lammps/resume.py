@@ -20,7 +20,7 @@ from ...errors import InputError
 from .export import INPUT_FILE, deck_lines
 
 __all__ = ["RESUME_FILE", "RESTART_MAGIC", "restart_steps", "restart_complete", "latest_restart", "cut_dump",
-           "write_resume", "resume_log"]
+           "write_resume", "resume_log", "resumable"]
 
 #: the continuation deck
 RESUME_FILE = "in.resume.cd"
@@ -125,6 +125,18 @@ def cut_dump(path, step):
     return size - cut
 
 
+def resumable(folder):
+    """The restart step a continuation of the folder starts from (:func:`latest_restart`); refused in one
+    line naming the folder when there is none."""
+    step = latest_restart(folder)
+    if step is None:
+        why = ("none written" if not restart_steps(folder) else
+               "none whole with its frame in frames.dump")
+        raise InputError("DIR", str(folder), f"a stopped LAMMPS run with a restart file restart.STEP ({why}; "
+                         "the deck writes them with restart_every)")
+    return step
+
+
 def _write_forces(dump, step, prefix):
     """The forces of the dump's frame at ``step`` as three LAMMPS ``atomfile`` files ``PREFIXx`` etc.
     ("id value" lines, the dump's own text: no rounding)."""
@@ -162,12 +174,7 @@ def write_resume(atoms, calc, dyn, folder, **deck):
         k = next((i for i, (a, b) in enumerate(zip(have, first)) if a != b), min(len(have), len(first)))
         raise InputError("DIR", str(folder), "a deck of this scene with these parameters (its "
                          f"{INPUT_FILE} differs from the rebuilt deck at line {k + 1})")
-    step = latest_restart(folder)
-    if step is None:
-        why = ("none written" if not restart_steps(folder) else
-               "none whole with its frame in frames.dump")
-        raise InputError("DIR", str(folder), f"a stopped LAMMPS run with a restart file restart.STEP ({why}; "
-                         "the deck writes them with restart_every)")
+    step = resumable(folder)
     for p in sorted(folder.glob("*.dump")):
         cut_dump(p, step)
     forces = None
