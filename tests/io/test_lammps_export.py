@@ -391,3 +391,27 @@ def test_every_drive_writes_or_refuses_its_own_form(tmp_path):
     assert "\n" not in str(exc.value)
     assert not (tmp_path / "pusher").exists() and not (tmp_path / "region").exists()
     assert Drive._KINDS.pop("Pusher") is Pusher
+
+
+def test_continuation_runs_resume_the_removal_loop():
+    """The runs of a continuation from a restart step (the deck text; run by LAMMPS in
+    tests/io/test_lammps_engine.py::test_resume_from_restart_file): no region, ``run N upto``; with the
+    removal every 10 of 1015 steps, from within a block ``upto`` its end and its deletion, from a block's
+    end that block's deletion first (the restart file holds the state before it), in the last partial
+    block ``upto`` the end; the loop then counts the blocks left."""
+    from clusterdyn.io.lammps.export import _run_lines, run_boundaries
+    assert _run_lines(647) == ["run             647"]
+    assert _run_lines(647, start=320) == ["run             647 upto"]
+    first = _run_lines(1015, 10)
+    assert first[:3] == ["variable        cdblock loop 101", "label           cdremove", "run             10"]
+    assert first[-1] == "run             5"
+    mid = _run_lines(1015, 10, start=255)
+    assert mid[:3] == ["run             260 upto", "delete_atoms    group gone compress no",
+                       "variable        cdblock loop 75"] and mid[-1] == "run             5"
+    end = _run_lines(1015, 10, start=170, bonds=True)
+    assert end[2] == "delete_atoms    group cdgone_now compress no bond yes"
+    assert "intersect cdout_now removable" in end[1] and end[3] == "variable        cdblock loop 84"
+    assert _run_lines(1015, 10, start=1010, bonds=True) == end[:3] + ["run             5"]
+    assert _run_lines(1015, 10, start=1012) == ["run             1015 upto"]
+    assert _run_lines(1010, 10, start=1010, bonds=True) == end[:3]
+    assert run_boundaries(1015, 10)[-1] == 1010 and run_boundaries(647) == [0]

