@@ -14,7 +14,6 @@ from .. import units
 from ..analysis.shock import ShockTracker
 from ..build import Plate, fcc_packing, polycrystal
 from ..build.lattice import SQRT2
-from ..build.two_phase import rest_volumes
 from ..calculators import ClusterDynamics
 from ..errors import InputError
 from ..materials import get_material, hugoniot
@@ -90,7 +89,7 @@ def polycrystal_shock_setup(u=1.0 * units.km_s, sample="polycrystal", material="
         d_guess = pot.c0 + 1.3 * u
     nsteps = int(math.ceil(0.8 * L / d_guess / dt))
     return ShockSetup(atoms, dyn, piston_index=np.nonzero(mask)[0], nsteps=nsteps, slab=max(a, r0), length=L, u=u,
-                      rho0=rho0, x0=float(atoms.positions[~mask, 0].min()), rest_volume=rest_volumes(atoms),
+                      rho0=rho0, x0=float(atoms.positions[~mask, 0].min()), rest_volume=atoms.get_masses() / rho0,
                       sample={"report": report or {}, "relax": relax or {}}, material=mat.replace(rho0=rho0))
 
 
