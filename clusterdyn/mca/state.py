@@ -16,7 +16,8 @@ parameters (strengths, friction, welding threshold) fixed at set-up.
 
 Per automaton (``_n``, by row at set-up, stored by id): ``thlast_nc``
 rotation at the last commit, ``epsp_n`` plastic strain, ``omega_n`` volume (Voronoi cell
-clipped at the sample surface).
+clipped at the sample surface), ``T_n`` temperature (K) where a material has Johnson-Cook's
+thermal term (an empty array otherwise: checkpointed only when present).
 """
 
 import numpy as np
@@ -27,13 +28,15 @@ from ..neighbors import minimum_image
 from ..build.tessellation import tessellate
 from .kernels import incidence
 from ..materials.mca import check_mca_material
-from .response.plastic import hardening_table, rate_constants
+from .response.plastic import hardening_table, rate_constants, thermal_constants
 
 #: per-pair arrays that are history (checkpointed); the rest are set-up constants (also checkpointed)
 PAIR_ARRAYS = ("pid_p2", "linked_p", "S_p", "q0_p2", "r0_p", "sig_p2", "tau_p2c", "dlast_pc", "D_p",
                "count_p", "sigc_p", "beta_p", "mu_p", "sigw_p", "nweld_p", "sigd_p", "Dc_p",
                "epsd_p", "epsf_p")
 ATOM_ARRAYS = ("id_n", "thlast_nc", "epsp_n", "omega_n", "P_n")
+#: room temperature (K) of a material without the thermal term (a placeholder: never used)
+ROOM_K = 294.0
 
 
 def mca_materials_of(atoms, materials=None):
@@ -126,6 +129,7 @@ class MCAState:
         self.thlast_nc = np.array(atoms.arrays.get("theta", np.zeros((len(atoms), 3))), float)
         self.epsp_n = np.zeros(len(atoms))
         self.P_n = np.zeros(len(atoms))       # mean stress from the volume change (energy ledger)
+        self.T_n = np.zeros(0)                # temperatures: set by _material_setup if a material heats
         rows = self.rows(ids)
         ii, jj = rows[self.pid_p2[:, 0]], rows[self.pid_p2[:, 1]]
         d = pos[jj] - pos[ii]
@@ -133,6 +137,7 @@ class MCAState:
         self.dlast_pc = np.ascontiguousarray(d)
         self.r0_p = np.linalg.norm(d, axis=1)
         self._material_setup(atoms, ii, jj)
+        self._initial_temperatures()
         cracks = atoms.info.get("mca_cracks", [])
         for c in cracks:
             self.unlink_across(pos, ii, jj, **c)
@@ -158,6 +163,7 @@ class MCAState:
         mid = np.asarray(atoms.arrays["material"], np.int64)
         self.mat_id_n = mid[self.rows(ids)[self.id_n]]
         self._material_constants()
+        self._initial_temperatures()
         self._flags()
         return self
 
@@ -175,6 +181,11 @@ class MCAState:
         self.implicit_m = np.array([r[0] for r in rc], np.int8)
         self.rateC_m = np.array([r[1] for r in rc])
         self.rate0_m = np.array([r[2] for r in rc])
+        # Johnson-Cook's thermal term: (m, T_room, T_melt, beta/(rho c_p)), the last 0 where off
+        th = [thermal_constants(m) if p else None for m, p in zip(mats, self.plastic_m)]
+        self.thermal = any(t is not None for t in th)
+        self.therm_m4 = np.array([t if t is not None else (1.0, ROOM_K, 2.0 * ROOM_K, 0.0) for t in th],
+                                 dtype=float).reshape(len(mats), 4)
         k = max(len(t[0]) for t in tabs)
         self.tab_e = np.zeros((len(mats), k))
         self.tab_s = np.zeros((len(mats), k))
@@ -182,6 +193,14 @@ class MCAState:
             # pad by repeating the last point far out
             self.tab_e[q] = np.concatenate([e, e[-1] + 1.0 + np.arange(k - len(e))])
             self.tab_s[q] = np.concatenate([s, np.full(k - len(e), s[-1])])
+
+    def _initial_temperatures(self):
+        """Every automaton at its material's T_room where a material heats (a state restored
+        from a checkpoint keeps its own); an empty array where none does."""
+        if not self.thermal:
+            self.T_n = np.zeros(0)
+        elif getattr(self, "T_n", None) is None or len(self.T_n) != len(self.id_n):
+            self.T_n = self.therm_m4[self.mat_id_n, 1].copy()
 
     def _flags(self):
         """Kernel selection: a term the sample does not use is never run."""
@@ -512,6 +531,8 @@ class MCAState:
         if self.lnJ_n is not None:
             d["lnJ_n"] = self.lnJ_n.copy()
             d["Pref_n"] = self.Pref_n.copy()
+        if self.T_n.size:
+            d["T_n"] = self.T_n.copy()
         return d
 
     def set_state(self, d):
@@ -525,6 +546,9 @@ class MCAState:
         self.version = int(d.get("version", self.version)) + 1
         self.lnJ_n = None if d.get("lnJ_n") is None else np.array(d["lnJ_n"], dtype=float)
         self.Pref_n = None if d.get("Pref_n") is None else np.array(d["Pref_n"], dtype=float)
+        self.T_n = None if d.get("T_n") is None else np.ascontiguousarray(np.array(d["T_n"], dtype=float))
+        if hasattr(self, "therm_m4"):             # an existing state (else from_dict sets them)
+            self._initial_temperatures()
         self.version_pairs += 1
         self._inc_key = None
 
