@@ -25,7 +25,9 @@ MCA-specific parameters live in ``Material.extra``:
     plastic strain at onset / end of degradation (response "plastic-degrading", Fig. 3d)
 ``johnson_cook``
     dict A, B (eV/Angstrom^3), n, C, eps0 (1/s): J2 flow with the Johnson-Cook curve and an
-    implicit radial return (:mod:`clusterdyn.mca.response.plastic`); ``Al6061-T6``
+    implicit radial return (:mod:`clusterdyn.mca.response.plastic`); ``Al6061-T6``.  With
+    m, T_melt, T_room (K), c_p (eV/(amu K)) and beta also Johnson-Cook's thermal term and
+    adiabatic heating of each automaton; ``Al6061-T6-thermal``
 """
 
 from .. import units
@@ -125,6 +127,22 @@ def _al6061_t6():
                 "rho 2.7 g/cm3, E 69 GPa, nu 0.33 as Al6061 (ASM Handbook vol. 2, 1990)"))
 
 
+def _al6061_t6_thermal():
+    g = units.GPa
+    jc = {"A": 0.324 * g, "B": 0.114 * g, "n": 0.42, "C": 0.002, "eps0": 1.0,
+          "m": 1.34, "T_melt": 925.0, "T_room": 294.0, "c_p": 896.0 * units.J / units.kg,
+          "beta": 0.9}       # Taylor-Quinney (clusterdyn.mca.response.plastic.TAYLOR_QUINNEY)
+    return mca_material(
+        "Al6061-T6-thermal", 2.7, 69.0, 0.33, sigma_y_GPa=0.324, response="elastic-plastic",
+        hardening=None, mu=0.3, johnson_cook=jc,
+        source=("Al6061-T6 (same Johnson-Cook A, B, n, C, eps0 and elastic constants) with Johnson-Cook's "
+                "thermal term and adiabatic heating: m 1.34, T_melt 925 K from the same Johnson-Cook set "
+                "(D. R. Lesuer, G. J. Kay, M. M. LeBlanc, LLNL report UCRL-JC-134118, 2001); specific heat "
+                "c_p 896 J/(kg K) from Sandia's Payette material database (al_6061.py, MatWeb values); "
+                "T_room 294 K (the temperature of the Wilkins-Guinan tests); Taylor-Quinney share "
+                "beta 0.9 of the plastic work heats (our choice, the common value)"))
+
+
 def _copper():
     return mca_material(
         "copper", 8.96, 120.0, 0.34, sigma_y_GPa=0.07, response="elastic-plastic",
@@ -134,7 +152,7 @@ def _copper():
 
 
 MCA_MATERIALS = {"alumina": _alumina, "concrete": _concrete, "Al6061": _al6061,
-                 "Al6061-T6": _al6061_t6, "copper": _copper}
+                 "Al6061-T6": _al6061_t6, "Al6061-T6-thermal": _al6061_t6_thermal, "copper": _copper}
 
 for _name, _builder in MCA_MATERIALS.items():
     register_material(_name, _builder)

@@ -331,12 +331,16 @@ class MCADynamics(MolecularDynamics):
             Mn = np.empty(len(perm))
             wp = np.empty(len(perm))
             Gm, Km = st.G_m[mid], st.K_m[mid]
+            T = st.T_n[perm] if st.T_n.size else st.T_n        # empty: no thermal term
             changed += plastic.radial_return(s, first_n, side_p, side_s, mid, st.plastic_m,
                                              st.G_m[mid], st.tab_e, st.tab_s, soft, epsp,
                                              st.sig_p2, st.tau_p2c, Mn, st.implicit_m, st.rateC_m,
                                              st.rate0_m, self.dt, out["omega_n"], wp, st.q0_p2, st.S_p,
-                                             np.ascontiguousarray(st.P_n[perm]), 1.0 - 2.0 * Gm / (3.0 * Km))
+                                             np.ascontiguousarray(st.P_n[perm]), 1.0 - 2.0 * Gm / (3.0 * Km),
+                                             T, st.therm_m4)
             st.epsp_n[perm] = epsp
+            if T.size:
+                st.T_n[perm] = T
             self.plastic_work += float(wp.sum())
             if fl["plastic_degrading"]:
                 changed += plastic_degrading.degrade_plastic(i_p, j_p, st.linked_p, epsp, st.epsd_p,

@@ -60,8 +60,15 @@ def _hull_volume(pos):
 
 
 def compression_flow(across=6, material="Al6061-T6", strain=0.6, transits=40.0, damping=0.05,
-                     remesh_strain=0.1, D0=6.0 * units.mm, samples=120, courant=None, stream=None):
-    """Run one compression; returns a dict of arrays and summary numbers (module docstring)."""
+                     remesh_strain=0.1, D0=6.0 * units.mm, samples=120, courant=None, stream=None, ramp=0.05,
+                     inherit="automata"):
+    """Run one compression; returns a dict of arrays and summary numbers (module docstring).
+
+    ``ramp``: the platens' start, the fraction of the run over which their speed rises (half
+    cosine); ``inherit``: what a linked pair that survives a switch starts from
+    (:meth:`clusterdyn.mca.state.MCAState.retessellate`)."""
+    if not 0.0 < ramp < 0.5:
+        raise InputError("ramp", ramp, "a fraction of the run in (0, 0.5)")
     if not (isinstance(across, (int, np.integer)) and across >= 4):
         raise InputError("across", across, "an integer number of automata >= 4")
     if not 0.0 < strain < 0.8:
@@ -83,7 +90,7 @@ def compression_flow(across=6, material="Al6061-T6", strain=0.6, transits=40.0, 
     dt = default_timestep(atoms) if courant is None else default_timestep(atoms, courant=courant)
     eps_end = -math.log(1.0 - strain)
     T = transits * H0 / cl
-    ramp = 0.05 * T
+    ramp = ramp * T
     edot = eps_end / (T - 0.5 * ramp)
     t = np.linspace(0.0, T, 4001)
     rate = np.where(t < ramp, 0.5 * edot * (1 - np.cos(np.pi * t / ramp)), edot)
@@ -95,6 +102,7 @@ def compression_flow(across=6, material="Al6061-T6", strain=0.6, transits=40.0, 
     atoms.set_constraint([bot, top])
     dyn = MCADynamics(atoms, dt, damping=damping, remesh_strain=remesh_strain)
     st = dyn.state
+    st.set_inherit(inherit)
     V0 = float(st.omega_n.sum())
     Vi0 = st.interior_volume[0]
     layers = np.concatenate([lo, hi])

@@ -143,8 +143,9 @@ PARAMS = [
     Param("method", "cd", "cd: the CD polycrystal (the paper's model); mca: Movable Cellular Automata with "
           "J2 / Johnson-Cook flow and large-strain switching (fcc automata of size r0, default D0/8)",
           kind="choice", choices=("cd", "mca")),
-    Param("mca_material", "Al6061-T6", "MCA material (method=mca)", kind="choice",
-          choices=("Al6061-T6", "Al6061", "copper")),
+    Param("mca_material", "Al6061-T6", "MCA material (method=mca); Al6061-T6-thermal adds Johnson-Cook's "
+          "thermal term (adiabatic heating of each automaton)", kind="choice",
+          choices=("Al6061-T6", "Al6061-T6-thermal", "Al6061", "copper")),
     Param("mca_damping", 0.05, "MCA pair damping, fraction of critical (method=mca)", low=0.0),
     Param("remesh_strain", 0.1, "MCA: pair strain that triggers a re-tessellation (method=mca)", low=0.0,
           high=0.5, low_open=True),
@@ -247,6 +248,11 @@ def mca_ledger(dyn):
     for k in ("plastic", "switching", "splitting", "volume"):
         out[k] = float(led[k]) / J
     out["switches"] = int(dyn.remesh_count)
+    st = dyn.state
+    if st.T_n.size:        # Johnson-Cook's thermal term: the heat is part of the plastic work, not extra
+        from ..mca.response.plastic import heat_energy
+        out["heat"] = heat_energy(st, dyn.atoms) / J
+        out["T_max"] = float(st.T_n.max())
     return out
 
 
@@ -543,6 +549,10 @@ class TaylorScene(SceneDef):
                 q[f"E_{k}"] = Quantity(led[k], "J", note=txt)
             q["residual_over_plastic"] = Quantity(led["residual"] / max(abs(led["plastic"]), 1e-300), "",
                                                   note="energy ledger residual / plastic work")
+            if "heat" in led:
+                q["E_heat"] = Quantity(led["heat"], "J", note="heat of the automata, sum m c_p (T - T_room): "
+                                       "the Taylor-Quinney share of E_plastic, not extra energy")
+                q["T_max"] = Quantity(led["T_max"], "K", note="hottest automaton (adiabatic heating)")
         notes.append(sm["reason"] or f"NOT stopped by t_max = {info['t_max'] / units.us:.4g} us (criterion: "
                      f"velocity below {100 * STOP_SPEED:g}% of V or reversed and length within "
                      f"{100 * STOP_LENGTH:g}% over {STOP_WINDOW / units.us:g} us)")

@@ -26,6 +26,10 @@ PARAMS = [
     Param("damping", 0.05, "pair damping (fraction of critical)", low=0.0),
     Param("remesh_strain", 0.1, "pair strain that triggers a re-tessellation", low=0.0, high=0.5, low_open=True),
     Param("D0", 6.0, "cylinder diameter", unit="mm", low=0.0, low_open=True),
+    Param("ramp", 0.05, "the platens' start: fraction of the run over which their speed rises", low=0.0,
+          high=0.49, low_open=True),
+    Param("inherit", "automata", "what a surviving linked pair starts from at a switch: its automata's tensors "
+          "or its own state (MCAState.set_inherit)", kind="choice", choices=("automata", "pairs")),
 ]
 
 #: the aims of the check (issue 42): stress within 5% of the curve from 1% true strain on,
@@ -55,7 +59,9 @@ class CompressionFlowStudy(Study):
     json_name = "result.json"
 
     def tag(self, run):
-        return run.v["material"]
+        v = run.v
+        return v["material"] + ("" if v["inherit"] == "automata" else "_pairs") + \
+            ("" if v["ramp"] == 0.05 else f"_ramp{v['ramp']:g}")
 
     def plan(self, run):
         return [int(a) for a in run.v["across"]]
@@ -64,7 +70,7 @@ class CompressionFlowStudy(Study):
         v = run.v
         stream = None if run.quiet else sys.stdout
         return [compression_flow(a, v["material"], v["strain"], v["transits"], v["damping"], v["remesh_strain"],
-                                 v["D0"], stream=stream) for a in plan]
+                                 v["D0"], stream=stream, ramp=v["ramp"], inherit=v["inherit"]) for a in plan]
 
     def report(self, run, runs):
         folder = run.folder

@@ -34,6 +34,9 @@ PARAMS = [
           "of test labels like 'WG 373/L23,G200'", kind="str"),
     Param("wall", "frictionless", "the wall: frictionless or sticking", kind="choice",
           choices=("frictionless", "sticking")),
+    Param("material", "Al6061-T6", "MCA material: Al6061-T6 (isothermal Johnson-Cook) or Al6061-T6-thermal "
+          "(with the thermal term: each automaton heats from its plastic work)", kind="choice",
+          choices=("Al6061-T6", "Al6061-T6-thermal")),
 ]
 
 AIM_LF, AIM_DF = 0.05, 0.10
@@ -71,6 +74,8 @@ def _row(t, across, res, err, wall):
         row["residual_over_plastic"] = _q(res, "residual_over_plastic")[0]
         row["automata"] = res.extra.get("n_clusters")
         row["stopped"] = res.extra.get("stopped")
+        if "T_max" in res.quantities:                  # the thermal term
+            row["T_max"] = _q(res, "T_max")[0]
     return row
 
 
@@ -103,7 +108,8 @@ class TaylorStudy(Study):
     json_name = "result.json"
 
     def tag(self, run):
-        return f"{run.v['tests'].replace(',', '_').replace('/', '').replace(' ', '')}"
+        t = f"{run.v['tests'].replace(',', '_').replace('/', '').replace(' ', '')}"
+        return t if run.v["material"] == "Al6061-T6" else f"{t}_{run.v['material']}"
 
     def plan(self, run):
         """(test, across, taylor scene overrides) of every run."""
@@ -114,6 +120,8 @@ class TaylorStudy(Study):
                 plan.append((t, across, {"method": "mca", "L0": f"{t['L0_mm']}mm", "D0": f"{t['D0_mm']}mm",
                                          "V": f"{t['V_m_s']}m/s", "r0": f"{t['D0_mm'] / across:.6g}mm",
                                          "wall": v["wall"]}))
+                if v["material"] != "Al6061-T6":           # the isothermal runs keep their cache keys
+                    plan[-1][2]["mca_material"] = v["material"]
         return plan
 
     def collect(self, run, plan):
@@ -134,7 +142,8 @@ class TaylorStudy(Study):
 
     def report(self, run, rows):
         folder = run.folder
-        write_csv(folder / "mca_taylor.csv", rows, CSV_COLUMNS)
+        cols = CSV_COLUMNS + (["T_max"] if any("T_max" in r for r in rows) else [])
+        write_csv(folder / "mca_taylor.csv", rows, cols)
         text = format_table(rows, TABLE, title="MCA Taylor rods (Johnson-Cook 6061-T6) against the tests")
         (folder / "mca_taylor.md").write_text(markdown_table(rows, TABLE) + "\n")
         png = plot_taylor(rows, folder / "mca_taylor.png")

@@ -30,7 +30,8 @@ def _one_automaton(mat, s_dev_int, epsp0, dt):
                               np.array([mat.G]), tab_e, tab_s, np.ones(1), epsp, sig, tau, M,
                               np.array([imp], np.int8), np.array([C]), np.array([e0]), dt,
                               np.array([2.0]), wp, np.array([[1.0, 0.0]] * 3), np.full(3, 2.0),
-                              np.array([s_dev_int / 3]), np.array([1 - 2 * mat.G / (3 * mat.K)]))
+                              np.array([s_dev_int / 3]), np.array([1 - 2 * mat.G / (3 * mat.K)]),
+                              np.zeros(0), np.zeros((1, 4)))
     return n, epsp[0], M[0], wp[0], sig
 
 
