@@ -15,7 +15,7 @@ PKG = Path(__file__).resolve().parents[1] / "clusterdyn"
 #: ground up; a module may import its own layer (without cycles) and the layers below
 LAYERS = [
     ("ground", ("clusterdyn", "clusterdyn.units", "clusterdyn.errors", "clusterdyn.parallel",
-                "clusterdyn._openmp")),
+                "clusterdyn._openmp", "clusterdyn.fma")),
     ("materials", ("clusterdyn.materials",)),
     ("potentials", ("clusterdyn.potentials",)),
     ("build", ("clusterdyn.build",)),

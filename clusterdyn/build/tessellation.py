@@ -31,16 +31,13 @@ tests/mca/test_tessellation.py).  A 1e5-automaton fcc box: qhull about 40 s, the
 import hashlib
 import itertools
 import math
-from fractions import Fraction
 
 import numpy as np
-from llvmlite import ir
-from numba import config, njit
-from numba.core import cgutils, types
-from numba.extending import intrinsic
+from numba import njit
 from scipy.spatial import Voronoi
 
 from ..errors import InputError
+from ..fma import fma
 
 
 #: the last tessellation made, by a digest of its inputs: building an MCA sample tessellates the
@@ -217,32 +214,12 @@ def _box_geometry(vor, pts, kind, owner, n, dim, cell):
     return {"i_p": i_p, "j_p": j_p, "S_p": S, "q_p2": q2, "omega_n": omega, "vcell_n": vcell}
 
 
-@intrinsic
-def _fma_ir(typingctx, x, y, z):
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
-        return builder.call(fn, args)
-    return sig, codegen
-
-
-def _fma_python(x, y, z):
-    return float(Fraction(x) * Fraction(y) + Fraction(z))   # exact, then rounded once
-
-
-#: ``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``; exact rationals under NUMBA_DISABLE_JIT): the
-#: passes below repeat numpy's operations of :func:`_polygon_area_3d` in their order and rounding,
-#: and numpy's short dot products (``np.dot``, ``np.linalg.norm``, ``@`` of a 3-vector: OpenBLAS'
-#: ``ddot``/``dgemv`` below 16 terms) are chains of fused multiply-adds
-_fma = _fma_python if config.DISABLE_JIT else _fma_ir
 
 
 @njit(cache=True)
-def _dot_fma(a0, a1, a2, b0, b1, b2):
+def _dotfma(a0, a1, a2, b0, b1, b2):
     """``np.dot`` of two 3-vectors (OpenBLAS ddot): a fused chain from 0."""
-    return _fma(a2, b2, _fma(a1, b1, a0 * b0))
+    return fma(a2, b2, fma(a1, b1, a0 * b0))
 
 
 @njit(cache=True)
@@ -270,15 +247,15 @@ def _ridge_pass(pts, kind, rp, start, flat, vert, dim, rows, r_r, area, xy):
         if dim == 2:
             d0 = pts[b, 0] - pts[a, 0]
             d1 = pts[b, 1] - pts[a, 1]
-            r_r[k] = math.sqrt(_fma(d1, d1, d0 * d0))
+            r_r[k] = math.sqrt(fma(d1, d1, d0 * d0))
             e0 = vert[flat[s0 + 1], 0] - vert[flat[s0], 0]
             e1 = vert[flat[s0 + 1], 1] - vert[flat[s0], 1]
-            area[k] = math.sqrt(_fma(e1, e1, e0 * e0))
+            area[k] = math.sqrt(fma(e1, e1, e0 * e0))
             continue
         d0 = pts[b, 0] - pts[a, 0]
         d1 = pts[b, 1] - pts[a, 1]
         d2 = pts[b, 2] - pts[a, 2]
-        r = math.sqrt(_dot_fma(d0, d1, d2, d0, d1, d2))
+        r = math.sqrt(_dotfma(d0, d1, d2, d0, d1, d2))
         r_r[k] = r
         n0 = d0 / r
         n1 = d1 / r
@@ -297,12 +274,12 @@ def _ridge_pass(pts, kind, rp, start, flat, vert, dim, rows, r_r, area, xy):
         u0 = vert[flat[s0], 0] - c0
         u1 = vert[flat[s0], 1] - c1
         u2 = vert[flat[s0], 2] - c2
-        un = math.sqrt(_dot_fma(u0, u1, u2, u0, u1, u2))
+        un = math.sqrt(_dotfma(u0, u1, u2, u0, u1, u2))
         if un == 0.0:
             u0 = vert[flat[s0 + 1], 0] - c0
             u1 = vert[flat[s0 + 1], 1] - c1
             u2 = vert[flat[s0 + 1], 2] - c2
-            un = math.sqrt(_dot_fma(u0, u1, u2, u0, u1, u2))
+            un = math.sqrt(_dotfma(u0, u1, u2, u0, u1, u2))
         u0 = u0 / un
         u1 = u1 / un
         u2 = u2 / un
@@ -315,8 +292,8 @@ def _ridge_pass(pts, kind, rp, start, flat, vert, dim, rows, r_r, area, xy):
             e2 = vert[flat[m], 2] - c2
             # (pts - c) @ u: OpenBLAS dgemv's fused order for three columns, added to y = +0
             # (a -0 becomes +0: it decides arctan2's -pi or +pi and so the vertex order)
-            xy[0, m] = 0.0 + _fma(e2, u2, _fma(e0, u0, e1 * u1))
-            xy[1, m] = 0.0 + _fma(e2, v2, _fma(e0, v0, e1 * v1))
+            xy[0, m] = 0.0 + fma(e2, u2, fma(e0, u0, e1 * u1))
+            xy[1, m] = 0.0 + fma(e2, v2, fma(e0, v0, e1 * v1))
     return -1
 
 
@@ -357,8 +334,8 @@ def _ridge_area_pass(rows, start, xy, ang, area):
         for m in range(K):
             p = s0 + order[m]
             q = s0 + order[(m + 1) % K]
-            dxy = _fma(xy[1, q], xy[0, p], dxy)       # np.dot(x, np.roll(y, -1))
-            dyx = _fma(xy[0, q], xy[1, p], dyx)       # np.dot(y, np.roll(x, -1))
+            dxy = fma(xy[1, q], xy[0, p], dxy)       # np.dot(x, np.roll(y, -1))
+            dyx = fma(xy[0, q], xy[1, p], dyx)       # np.dot(y, np.roll(x, -1))
         area[k] = 0.5 * abs(dxy - dyx)
     return left
 

@@ -59,7 +59,7 @@ def test_fma_rounds_once_compiled_and_as_python():
     rounded before the addition gives 0.  Both the compiled fma and its Python fallback
     (NUMBA_DISABLE_JIT) must round once."""
     from numba import njit
-    from clusterdyn.engine.pair import _fma, _fma_python
+    from clusterdyn.fma import _fma, _fma_python
 
     @njit
     def compiled(x, y, z):
