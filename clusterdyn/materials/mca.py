@@ -112,12 +112,14 @@ def _al6061():
                 "(perfectly plastic unless a hardening curve is given); docs/theory.md 2.5"))
 
 
+#: Johnson-Cook strength of 6061-T6 (ASE units); the thermal variant adds its thermal term
+_AL6061_T6_JC = {"A": 0.324 * units.GPa, "B": 0.114 * units.GPa, "n": 0.42, "C": 0.002, "eps0": 1.0}
+
+
 def _al6061_t6():
-    g = units.GPa
-    jc = {"A": 0.324 * g, "B": 0.114 * g, "n": 0.42, "C": 0.002, "eps0": 1.0}
     return mca_material(
         "Al6061-T6", 2.7, 69.0, 0.33, sigma_y_GPa=0.324, response="elastic-plastic",
-        hardening=None, mu=0.3, johnson_cook=jc,
+        hardening=None, mu=0.3, johnson_cook=dict(_AL6061_T6_JC),
         source=("Aluminium alloy 6061-T6 with Johnson-Cook strength: A 324 MPa, B 114 MPa, "
                 "n 0.42, C 0.002, eps0 1/s (thermal term m 1.34, T_melt 925 K not modelled): "
                 "D. R. Lesuer, G. J. Kay, M. M. LeBlanc, Modeling large-strain, high-rate "
@@ -128,9 +130,7 @@ def _al6061_t6():
 
 
 def _al6061_t6_thermal():
-    g = units.GPa
-    jc = {"A": 0.324 * g, "B": 0.114 * g, "n": 0.42, "C": 0.002, "eps0": 1.0,
-          "m": 1.34, "T_melt": 925.0, "T_room": 294.0, "c_p": 896.0 * units.J / units.kg,
+    jc = {**_AL6061_T6_JC, "m": 1.34, "T_melt": 925.0, "T_room": 294.0, "c_p": 896.0 * units.J / units.kg,
           "beta": 0.9}       # Taylor-Quinney (clusterdyn.mca.response.plastic.TAYLOR_QUINNEY)
     return mca_material(
         "Al6061-T6-thermal", 2.7, 69.0, 0.33, sigma_y_GPa=0.324, response="elastic-plastic",
